@@ -1,0 +1,40 @@
+"""Reading and writing traces: the trace file format (design.md section 2) and datasets.
+
+Public API
+----------
+`Trace`, `Labels`
+    One recording in SI units, and the truth behind a simulated one.
+`read_trace`, `TraceReader`, `read_rows`
+    Load a file whole, or a sweep row by row; labels only when asked for.
+`write_trace`, `TraceWriter`
+    Write a `Trace` atomically, or stream rows / blocks straight to disk.
+`write_manifest`, `iter_traces`, `shard_path`
+    Folders of shard files with a ``manifest.json``.
+`TraceFormatError`
+    Raised for files that break the format.
+"""
+
+from afmlearn.io._format import FORMAT, FORMAT_VERSION
+from afmlearn.io.dataset import MANIFEST, iter_traces, shard_path, write_manifest
+from afmlearn.io.errors import TraceFormatError
+from afmlearn.io.labels import Labels
+from afmlearn.io.reader import TraceReader, read_rows, read_trace
+from afmlearn.io.trace import Trace
+from afmlearn.io.writer import TraceWriter, write_trace
+
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "MANIFEST",
+    "Labels",
+    "Trace",
+    "TraceFormatError",
+    "TraceReader",
+    "TraceWriter",
+    "iter_traces",
+    "read_rows",
+    "read_trace",
+    "shard_path",
+    "write_manifest",
+    "write_trace",
+]

@@ -1,0 +1,24 @@
+"""afmlearn's physics simulator: labelled synthetic dynamic-AFM deflection.
+
+numpy / scipy / numba only. Dimensionless inside (``tau = omega0 t``, lengths / rest gap,
+forces / ``k L_ref``); :class:`Scales` converts at the edges. See ``physics.md``.
+"""
+
+from ._scales import Scales
+from .cantilever import Cantilever
+from .excitation import AbstractExcitation, BaseExcitation, TipExcitation
+from .integrate import RK4, AbstractIntegrator, Segment, State
+from .system import System
+
+__all__ = [
+    "AbstractExcitation",
+    "AbstractIntegrator",
+    "BaseExcitation",
+    "Cantilever",
+    "RK4",
+    "Scales",
+    "Segment",
+    "State",
+    "System",
+    "TipExcitation",
+]

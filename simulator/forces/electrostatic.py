@@ -1,0 +1,60 @@
+"""Electrostatic sphere--plane attraction (dissertation ch. 6, eq. 6.2--6.5, sphere term)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, final
+
+import numpy as np
+
+from .._scales import Scales
+from . import _layout as L
+from .base import AbstractForceModel, check_range
+
+__all__ = ["Electrostatic"]
+
+EPSILON_0 = 8.8541878128e-12  # F/m
+
+
+@final
+class Electrostatic(AbstractForceModel):
+    """``F = -strength / (z (z + radius))`` (conservative, slower than ``1/z**2`` at large z).
+
+    From ``F = -(1/2) dC/dz V**2`` with ``dC/dz = -2 pi eps0 R**2 / (z**2 + R z)``.
+
+    Parameters
+    ----------
+    strength : float
+        ``pi eps0 R**2 V**2 / (k L**3)`` in dimensionless form, >= 0.
+    radius : float
+        Tip radius in units of ``L_ref``, > 0.
+    """
+
+    name = "electrostatic"
+
+    def __init__(self, *, strength: float, radius: float) -> None:
+        self.strength = check_range("strength", strength, low=0.0)
+        self.radius = check_range("radius", radius, low=0.0, low_open=True)
+
+    @classmethod
+    def from_si(
+        cls, *, voltage_v: float, tip_radius_m: float, scales: Scales
+    ) -> Electrostatic:
+        """From the tip--sample potential difference [V] and tip radius [m]."""
+        v = check_range("voltage_v", voltage_v, low=-1e4, high=1e4)
+        r = check_range("tip_radius_m", tip_radius_m, low=0.0, low_open=True)
+        ell = scales.length
+        strength = math.pi * EPSILON_0 * r**2 * v**2 / (scales.spring_constant * ell**3)
+        return cls(strength=strength, radius=r / ell)
+
+    def _fill(self, c: np.ndarray) -> None:
+        if c[L.ES] != 0.0:
+            raise ValueError("force: only one electrostatic term per model")
+        c[L.ES] = self.strength
+        c[L.R_ES] = self.radius
+
+    def _reference(self, z: np.ndarray, zdot: np.ndarray, contact: np.ndarray) -> np.ndarray:
+        return -self.strength / (z * (z + self.radius))
+
+    def parameters(self) -> dict[str, Any]:
+        return {"strength": self.strength, "radius": self.radius}

@@ -1,0 +1,7 @@
+"""Integrators (strategies as objects) and their state/segment records."""
+
+from .base import AbstractIntegrator
+from .rk4 import RK4
+from .state import Segment, State
+
+__all__ = ["AbstractIntegrator", "RK4", "Segment", "State"]
