@@ -8,9 +8,17 @@ from ._scales import Scales
 from .cantilever import Cantilever
 from .excitation import AbstractExcitation, BaseExcitation, TipExcitation
 from .integrate import RK4, AbstractIntegrator, Segment, State
+from .scenarios import Approach, SimulationResult, SteadyState, Sweep, Transient
+from .sensor import SensorChain
 from .system import System
 
 __all__ = [
+    "Approach",
+    "SensorChain",
+    "SimulationResult",
+    "SteadyState",
+    "Sweep",
+    "Transient",
     "AbstractExcitation",
     "AbstractIntegrator",
     "BaseExcitation",

@@ -1,0 +1,87 @@
+"""Per-trace labels computed from integrated segments (dimensionless).
+
+Definitions (used everywhere in afmlearn):
+
+* ``dissipated_energy``: energy delivered to the sample per drive cycle, ``-oint F dz``,
+  averaged over the recorded cycles (units ``k L_ref**2``; 0 for conservative models).
+* ``contact_fraction``: share of time spent in the contact regime.
+* ``coupling_strength``: share of the tip motion carried by modes >= 2,
+  ``var(sum_{i>=2} q_i) / (var(q_1) + var(sum_{i>=2} q_i))`` in [0, 1].
+* ``regime``: ``free`` (no force), ``attractive`` (force but never in contact),
+  ``repulsive`` (intermittent contact, tapping) or ``permanent_contact``.
+* ``amplitude``, ``phase``: first-harmonic amplitude and phase lag of the deflection relative
+  to the drive phase (lock-in over the recorded span).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .integrate.state import Segment
+
+__all__ = ["segment_labels", "coupling_strength", "lock_in"]
+
+
+def lock_in(x: NDArray[np.float64], phase: NDArray[np.float64], harmonic: int = 1) -> complex:
+    """Complex amplitude of ``x`` at ``harmonic`` of the drive: ``x ~ Re(A e^{i h theta})``.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+    phase : ndarray, shape (n,)
+        Drive phase ``theta`` at each sample.
+    """
+    return complex(2.0 * np.mean(x * np.exp(-1j * harmonic * phase)))
+
+
+def coupling_strength(q: NDArray[np.float64]) -> float:
+    """Share of tip motion carried by modes >= 2; ``q`` has shape (n_modes, n)."""
+    if q.shape[0] < 2:
+        return 0.0
+    v1 = float(np.var(q[0]))
+    vh = float(np.var(q[1:].sum(axis=0)))
+    tot = v1 + vh
+    return vh / tot if tot > 0 else 0.0
+
+
+def segment_labels(seg: Segment, b: int = 0) -> dict[str, Any]:
+    """Scalar labels of trajectory ``b`` of a recorded segment."""
+    n = seg.n_samples
+    duration = n * seg.dt
+    om = float(seg.omega[b])
+    cycles = duration * om / (2.0 * math.pi)
+    w = seg.work[b]
+    x = seg.q[b].sum(axis=0)
+    f = seg.force[b]
+    z = seg.gap[b]
+    cf = float(w[4] / duration)
+    fmax = float(np.max(np.abs(f)))
+    if fmax == 0.0:
+        regime = "free"
+    elif cf <= 0.0:
+        regime = "attractive"
+    elif cf >= 1.0 - 1e-9:
+        regime = "permanent_contact"
+    else:
+        regime = "repulsive"
+    # lock-in over whole periods only
+    n_whole = int(math.floor(cycles) * (2.0 * math.pi / om) / seg.dt)
+    sl = slice(0, n_whole if n_whole > 0 else n)
+    a1 = lock_in(x[sl], seg.phase[b][sl])
+    return {
+        "dissipated_energy": float(w[3] / cycles) if cycles > 0 else 0.0,
+        "drive_energy": float(w[0] / cycles) if cycles > 0 else 0.0,
+        "contact_fraction": cf,
+        "coupling_strength": coupling_strength(seg.q[b]),
+        "regime": regime,
+        "amplitude": abs(a1),
+        "phase": float(-np.angle(a1)),
+        "mean_deflection": float(np.mean(x)),
+        "min_gap": float(np.min(z)),
+        "max_force": float(np.max(f)),
+        "min_force": float(np.min(f)),
+    }

@@ -1,0 +1,74 @@
+"""Approach (and optional retract) ramp: the rest gap varies in time (dynamic spectroscopy)."""
+
+from __future__ import annotations
+
+import math
+from typing import final
+
+from ..forces.base import check_range
+from ..integrate.state import State
+from ..system import System
+from .base import AbstractScenario, as_result, auto_settle_periods, settle
+from .result import SimulationResult
+
+__all__ = ["Approach"]
+
+
+@final
+class Approach(AbstractScenario):
+    """Settle at ``gap_start`` (far away), then ramp the rest gap linearly to ``gap_end``.
+
+    Parameters
+    ----------
+    omega : float
+        Drive frequency (> 0).
+    gap_start, gap_end : float
+        Rest gap at the start and end of the ramp (> 0).
+    n_periods : float
+        Duration of the ramp in drive periods (the ramp must be slow compared with ``Q``
+        periods for a quasi-static amplitude--distance curve).
+    retract : bool
+        Append the reverse ramp (approach--retract cycle).
+    settle_periods : float or None
+        As :class:`SteadyState`.
+    """
+
+    name = "approach"
+
+    def __init__(self, *, omega: float = 1.0, gap_start: float = 2.0, gap_end: float = 0.5,
+                 n_periods: float = 2000.0, retract: bool = False,
+                 settle_periods: float | None = None, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self.omega = check_range("omega", omega, low=0.0, low_open=True)
+        self.gap_start = check_range("gap_start", gap_start, low=0.0, low_open=True)
+        self.gap_end = check_range("gap_end", gap_end, low=0.0, low_open=True)
+        self.n_periods = check_range("n_periods", n_periods, low=0.0, low_open=True)
+        self.retract = bool(retract)
+        self.settle_periods = (None if settle_periods is None else
+                               check_range("settle_periods", settle_periods, low=0.0))
+
+    @property
+    def dt(self) -> float:
+        return 2.0 * math.pi / (self.omega * self.samples_per_period)
+
+    def total_samples(self, system: System) -> int:
+        sp = auto_settle_periods(system) if self.settle_periods is None else self.settle_periods
+        ramps = 2 if self.retract else 1
+        return int(math.ceil((sp + ramps * self.n_periods) * self.samples_per_period))
+
+    def run(self, system: System, *, progress=None) -> SimulationResult:
+        sp = auto_settle_periods(system) if self.settle_periods is None else self.settle_periods
+        state = State.free_orbit(system, omega=self.omega, gap=self.gap_start)
+        state = settle(system, state, integrator=self.integrator, omega=self.omega, dt=self.dt,
+                       periods=sp, progress=progress)
+        n = int(round(self.n_periods * self.samples_per_period))
+        rate = (self.gap_end - self.gap_start) / (n * self.dt)
+        segs = [self.integrator.run(system, state, omega=self.omega, n_samples=n, dt=self.dt,
+                                    gap_rate=rate, record_velocity=self.record_velocity)]
+        if self.retract:
+            segs.append(self.integrator.run(system, segs[0].end, omega=self.omega, n_samples=n,
+                                            dt=self.dt, gap_rate=-rate,
+                                            record_velocity=self.record_velocity))
+        if progress is not None:
+            progress(n * len(segs))
+        return as_result(system, self.name, segs, self.to_dict())

@@ -1,0 +1,120 @@
+"""Scenario base class and shared helpers."""
+
+from __future__ import annotations
+
+import abc
+import math
+
+import numpy as np
+
+from ..forces.base import check_range
+from ..integrate.base import AbstractIntegrator
+from ..integrate.rk4 import RK4
+from ..integrate.state import Segment, State
+from ..labels import segment_labels
+from ..system import System
+from .result import SimulationResult
+
+__all__ = ["AbstractScenario", "settle", "sync_contact", "as_result"]
+
+#: settle in chunks of this many samples (bounded memory for long settles)
+_CHUNK = 200_000
+
+
+def sync_contact(system: System, state: State) -> None:
+    """After a jump of the rest gap, put the regime on the approach branch where it must be.
+
+    A non-hysteretic model is in contact iff ``z <= a0``; a hysteretic one keeps an existing
+    contact unless the jump took the tip beyond the break point.
+    """
+    th = state.theta
+    z = state.gap - state.q.sum(axis=1) - system.excitation.gap_modulation * np.sin(th)
+    if not system.force.has_contact:
+        state.contact[:] = 0
+        return
+    a0 = system.force.a0
+    brk = system.force.break_indentation
+    new = np.where(state.contact == 1, z <= a0 - brk, z <= a0)
+    state.contact[:] = new.astype(np.int8)
+
+
+def settle(system: System, state: State, *, integrator: AbstractIntegrator, omega: float,
+           dt: float, periods: float, progress=None) -> State:
+    """Integrate ``periods`` drive periods without recording; return the end state."""
+    n = int(math.ceil(periods * 2.0 * math.pi / (omega * dt)))
+    while n > 0:
+        m = min(n, _CHUNK)
+        state = integrator.run(system, state, omega=omega, n_samples=m, dt=dt).end
+        n -= m
+        if progress is not None:
+            progress(m)
+    return state
+
+
+def auto_settle_periods(system: System) -> float:
+    """Default settling time: ``2.5 Q_1`` drive periods (transient decays by ~e^-8)."""
+    return 2.5 * float(system.cantilever.quality_factors[0])
+
+
+def as_result(system: System, scenario: str, segs: list[Segment], meta: dict,
+              *, labels_from: list[Segment] | None = None) -> SimulationResult:
+    """Concatenate segments of one trajectory (batch index 0) into a result."""
+    q = np.concatenate([s.q[0] for s in segs], axis=-1)
+    v = (np.concatenate([s.v[0] for s in segs], axis=-1) if segs[0].v is not None else None)
+    lab = segment_labels(_merge(segs))
+    return SimulationResult(
+        system=system, scenario=scenario, dt=segs[0].dt, omega=float(segs[0].omega[0]), q=q,
+        force=np.concatenate([s.force[0] for s in segs]),
+        gap=np.concatenate([s.gap[0] for s in segs]),
+        rest_gap=np.concatenate([s.rest_gap[0] for s in segs]),
+        contact=np.concatenate([s.contact[0] for s in segs]),
+        phase=np.concatenate([s.phase[0] for s in segs]), labels=lab, meta=meta, velocity=v)
+
+
+def _merge(segs: list[Segment]) -> Segment:
+    if len(segs) == 1:
+        return segs[0]
+    first, last = segs[0], segs[-1]
+    return Segment(
+        q=np.concatenate([s.q for s in segs], axis=-1), v=None,
+        force=np.concatenate([s.force for s in segs], axis=-1),
+        contact=np.concatenate([s.contact for s in segs], axis=-1),
+        tau_start=first.tau_start, theta_start=first.theta_start, gap_start=first.gap_start,
+        omega=first.omega, gap_rate=first.gap_rate, gap_modulation=first.gap_modulation,
+        dt=first.dt, start=first.start, end=last.end)
+
+
+class AbstractScenario(abc.ABC):
+    """A measurement protocol. Subclasses store settings and implement :meth:`run`.
+
+    Common settings: ``samples_per_period`` (sampling rate in samples per drive period, or per
+    free-resonance period for sweeps), ``integrator`` (default :class:`RK4` automatic),
+    ``record_velocity``.
+    """
+
+    name = "abstract"
+
+    def __init__(self, *, samples_per_period: float = 200.0,
+                 integrator: AbstractIntegrator | None = None,
+                 record_velocity: bool = False) -> None:
+        self.samples_per_period = check_range("samples_per_period", samples_per_period,
+                                              low=4.0)
+        self.integrator = integrator if integrator is not None else RK4()
+        if not isinstance(self.integrator, AbstractIntegrator):
+            raise ValueError("integrator must be an AbstractIntegrator, got "
+                             f"{type(self.integrator).__name__}")
+        self.record_velocity = bool(record_velocity)
+
+    @abc.abstractmethod
+    def run(self, system: System, *, progress=None) -> SimulationResult:
+        """Simulate ``system``; ``progress(n)`` (optional) is called with samples done."""
+
+    def total_samples(self, system: System) -> int:
+        """Samples integrated in total (settling included), for progress bars."""
+        return 0
+
+    def to_dict(self) -> dict:
+        d = {k: v for k, v in vars(self).items() if k != "integrator"}
+        d["integrator"] = repr(self.integrator)
+        d["scenario"] = self.name
+        return d
