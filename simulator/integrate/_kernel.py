@@ -261,10 +261,11 @@ def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, 
                     v_out[b, i, k] = v[i]
             f_out[b, k] = f
             c_out[b, k] = contact
-            # exact drive phase at each sample start (rotation within the sample)
-            th = th0 + om * (tau - tg)
-            c = math.cos(th)
-            s = math.sin(th)
+            # drive cos/sin advance by rotation; re-synchronised exactly every 64 samples
+            if k % 64 == 0:
+                th = th0 + om * (tau - tg)
+                c = math.cos(th)
+                s = math.sin(th)
             for _sub in range(substeps):
                 t_end = tau + h
                 n_ev = 0
