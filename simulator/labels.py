@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from .integrate.state import Segment
 
-__all__ = ["segment_labels", "coupling_strength", "lock_in"]
+__all__ = ["segment_labels", "trace_labels", "coupling_strength", "lock_in"]
 
 
 def lock_in(x: NDArray[np.float64], phase: NDArray[np.float64], harmonic: int = 1) -> complex:
@@ -50,16 +50,34 @@ def coupling_strength(q: NDArray[np.float64]) -> float:
 
 def segment_labels(seg: Segment, b: int = 0) -> dict[str, Any]:
     """Scalar labels of trajectory ``b`` of a recorded segment."""
-    n = seg.n_samples
-    duration = n * seg.dt
-    om = float(seg.omega[b])
-    cycles = duration * om / (2.0 * math.pi)
-    w = seg.work[b]
-    x = seg.q[b].sum(axis=0)
-    f = seg.force[b]
-    z = seg.gap[b]
-    cf = float(w[4] / duration)
-    fmax = float(np.max(np.abs(f)))
+    return trace_labels(q=seg.q[b], force=seg.force[b], gap=seg.gap[b], phase=seg.phase[b],
+                        work=seg.work[b], dt=seg.dt, omega=float(seg.omega[b]))
+
+
+def trace_labels(*, q: NDArray[np.float64], force: NDArray[np.float64],
+                 gap: NDArray[np.float64], phase: NDArray[np.float64],
+                 work: NDArray[np.float64], dt: float, omega: float) -> dict[str, Any]:
+    """Scalar labels of one recorded trace.
+
+    Parameters
+    ----------
+    q : ndarray, shape (n_modes, n)
+        Modal deflections.
+    force, gap, phase : ndarray, shape (n,)
+        Tip--sample force, gap ``z`` and drive phase at each sample.
+    work : ndarray, shape (5,)
+        Work integrals accumulated over the trace (see ``integrate/_kernel.py``).
+    dt : float
+        Sample interval.
+    omega : float
+        Drive frequency.
+    """
+    n = q.shape[-1]
+    duration = n * dt
+    cycles = duration * omega / (2.0 * math.pi)
+    x = q.sum(axis=0)
+    cf = float(work[4] / duration)
+    fmax = float(np.max(np.abs(force)))
     if fmax == 0.0:
         regime = "free"
     elif cf <= 0.0:
@@ -69,19 +87,19 @@ def segment_labels(seg: Segment, b: int = 0) -> dict[str, Any]:
     else:
         regime = "repulsive"
     # lock-in over whole periods only
-    n_whole = int(math.floor(cycles) * (2.0 * math.pi / om) / seg.dt)
+    n_whole = int(math.floor(cycles) * (2.0 * math.pi / omega) / dt)
     sl = slice(0, n_whole if n_whole > 0 else n)
-    a1 = lock_in(x[sl], seg.phase[b][sl])
+    a1 = lock_in(x[sl], phase[sl])
     return {
-        "dissipated_energy": float(w[3] / cycles) if cycles > 0 else 0.0,
-        "drive_energy": float(w[0] / cycles) if cycles > 0 else 0.0,
+        "dissipated_energy": float(work[3] / cycles) if cycles > 0 else 0.0,
+        "drive_energy": float(work[0] / cycles) if cycles > 0 else 0.0,
         "contact_fraction": cf,
-        "coupling_strength": coupling_strength(seg.q[b]),
+        "coupling_strength": coupling_strength(q),
         "regime": regime,
         "amplitude": abs(a1),
         "phase": float(-np.angle(a1)),
         "mean_deflection": float(np.mean(x)),
-        "min_gap": float(np.min(z)),
-        "max_force": float(np.max(f)),
-        "min_force": float(np.min(f)),
+        "min_gap": float(np.min(gap)),
+        "max_force": float(np.max(force)),
+        "min_force": float(np.min(force)),
     }

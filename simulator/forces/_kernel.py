@@ -76,10 +76,12 @@ def ts_force(z: float, zdot: float, contact: int, p) -> float:
         f += p[L.LJ_REP] / (z4 * z4)
     if p[L.EXPD] != 0.0:
         f -= p[L.EXPD] * math.exp(-z / p[L.ZB]) * zdot
+    # long-range attractions saturate at contact (evaluated at a0 while in contact)
+    zl = p[L.A0] if contact != 0 else z
     if p[L.ES] != 0.0:
-        f -= p[L.ES] / (z * (z + p[L.R_ES]))
+        f -= p[L.ES] / (zl * (zl + p[L.R_ES]))
     if p[L.SPH] != 0.0:
-        w = z * (z + 2.0 * p[L.R_SPH])
+        w = zl * (zl + 2.0 * p[L.R_SPH])
         f -= p[L.SPH] / (w * w)
     if contact != 0:
         a0 = p[L.A0]

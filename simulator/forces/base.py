@@ -60,6 +60,8 @@ class AbstractForceModel(abc.ABC):
 
     #: short name used in configs and labels
     name: str = "abstract"
+    #: long-range terms that stop growing once the tip touches (evaluated at ``a0`` in contact)
+    saturates_in_contact: bool = False
 
     # ------------------------------------------------------------------ abstract hooks
     @abc.abstractmethod

@@ -20,6 +20,9 @@ EPSILON_0 = 8.8541878128e-12  # F/m
 class Electrostatic(AbstractForceModel):
     """``F = -strength / (z (z + radius))`` (conservative, slower than ``1/z**2`` at large z).
 
+    Combined with a contact law, the term is held at its value at ``a0`` while in contact (the
+    capacitance gradient saturates once the tip touches), so it cannot diverge at ``z -> 0``.
+
     From ``F = -(1/2) dC/dz V**2`` with ``dC/dz = -2 pi eps0 R**2 / (z**2 + R z)``.
 
     Parameters
@@ -31,6 +34,7 @@ class Electrostatic(AbstractForceModel):
     """
 
     name = "electrostatic"
+    saturates_in_contact = True
 
     def __init__(self, *, strength: float, radius: float) -> None:
         self.strength = check_range("strength", strength, low=0.0)

@@ -7,7 +7,9 @@ from typing import Any, final
 
 import numpy as np
 
+from . import _layout as L
 from .base import AbstractForceModel
+from .lennard_jones import LennardJones
 
 __all__ = ["ForceSum"]
 
@@ -17,14 +19,16 @@ class ForceSum(AbstractForceModel):
     """Sum of force models sharing one regime state.
 
     At most one member may carry a contact law; long-range and damping terms add.
+    :class:`~simulator.forces.LennardJones` cannot be combined with a contact law: its ``z**-2``
+    attraction shares the canonical ``VDW`` coefficient, which the compiled kernel freezes at
+    ``-vdw / a0**2`` in contact (DMT continuity) or drops (hysteretic JKR), so the kernel would
+    disagree with the NumPy reference inside contact.
 
     Parameters
     ----------
     terms : sequence of AbstractForceModel
         At least one model. Nested sums are flattened.
     """
-
-    name = "sum"
 
     def __init__(self, terms: Sequence[AbstractForceModel]) -> None:
         flat: list[AbstractForceModel] = []
@@ -35,7 +39,10 @@ class ForceSum(AbstractForceModel):
         if not flat:
             raise ValueError("terms: need at least one force model")
         self.terms = tuple(flat)
-        self.coefficients()  # validates compatibility (one contact law, ...)
+        c = self.coefficients()  # validates compatibility (one contact law, ...)
+        if c[L.CONTACT] and any(isinstance(t, LennardJones) for t in flat):
+            raise ValueError("terms: LennardJones cannot be combined with a contact law (its "
+                             "z**-2 attraction would be frozen at a0 in contact)")
 
     @property
     def name(self) -> str:  # type: ignore[override]
@@ -54,7 +61,9 @@ class ForceSum(AbstractForceModel):
             t._fill(c)
 
     def _reference(self, z: np.ndarray, zdot: np.ndarray, contact: np.ndarray) -> np.ndarray:
-        return sum((t._reference(z, zdot, contact) for t in self.terms), np.zeros_like(z))
+        z_held = np.where(contact, self.a0, z)  # long-range terms saturate at contact
+        return sum((t._reference(z_held if t.saturates_in_contact else z, zdot, contact)
+                    for t in self.terms), np.zeros_like(z))
 
     def parameters(self) -> dict[str, Any]:
         return {"terms": [t.to_dict() for t in self.terms]}

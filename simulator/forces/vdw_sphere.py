@@ -21,6 +21,9 @@ class SphereVdW(AbstractForceModel):
     ``-H R**3 / (z**2 (2R + z)**2)`` without the factor 2/3; that form would not reduce to
     ``-H R / (6 z**2)``, so the exact Hamaker result is used here.)
 
+    Combined with a contact law, the term is held at its value at ``a0`` while in contact,
+    like the DMT tail.
+
     Parameters
     ----------
     strength : float
@@ -30,6 +33,7 @@ class SphereVdW(AbstractForceModel):
     """
 
     name = "vdw_sphere"
+    saturates_in_contact = True
 
     def __init__(self, *, strength: float, radius: float) -> None:
         self.strength = check_range("strength", strength, low=0.0)

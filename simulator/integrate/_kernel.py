@@ -7,6 +7,15 @@ inside the step (cubic Hermite interpolant of the gap, then Newton on the RK4 su
 the step is split there. Between events the stage at the end of a step is reused as the first
 stage of the next (FSAL), so a regular step costs four force evaluations.
 
+Contact laws are weakly singular at the switch (``delta**1.5`` for Hertz, ``sqrt(delta)
+delta'`` for Kelvin--Voigt, ``sqrt(delta - delta_c)`` at a JKR neck), which would cut RK4's
+local error to ``O(h**1.5 .. h**2.5)``. Steps are therefore graded geometrically on the
+singular side of each switch: after entering contact the step grows as
+``max(GRADE_MIN h, GRADE_RATIO * (tau - tau_event))`` until it reaches ``h``; while moving
+out of contact the step shrinks the same way with the estimated time to the break
+(``(z_break - z) / z'``), and the partial step that ends on the break is graded too. This costs
+some 60--80 extra steps per contact and removes most of the error constant.
+
 Work integrals (``W``): 0 drive input ``int sum_i drive_i v_i``, 1 cantilever damping
 ``int sum_i D_i v_i**2``, 2 work done on the tip--sample force ``int F sum_i s_i v_i``,
 3 energy delivered to the sample ``-int F z'``, 4 time in contact.
@@ -25,6 +34,9 @@ from ..forces._kernel import ts_force
 N_WORK = 5
 MAX_EVENTS_PER_STEP = 16
 EVENT_TOL = 1e-13
+#: graded steps near a contact switch: step = max(GRADE_MIN h, GRADE_RATIO * distance)
+GRADE_RATIO = 0.25
+GRADE_MIN = 1e-3
 
 
 @njit(cache=True, inline="always", _nrt=False)
@@ -174,6 +186,46 @@ def _first_crossing(e0, e1, d0, d1, sgn):
     return -1.0
 
 
+@njit(cache=True, _nrt=False)
+def _graded_to_end(q, v, W, M, tau, length, hmin, contact, K, Dair, Dcon, S, dc, ds, yb, om,
+                   g0, gr, tg, th0, fp, a1, p1, qe, ve, We, qg, vg, Wg, ag, pg, wk, pk):
+    """Integrate from (q, v, W) at ``tau`` over ``length`` with steps shrinking geometrically
+    towards the end (a singular point of the force); result in (qe, ve, We).
+
+    ``(a1, p1)`` is the first stage at the start (not modified).
+    """
+    for i in range(M):
+        qg[i] = q[i]
+        vg[i] = v[i]
+        ag[i] = a1[i]
+    for j in range(N_WORK):
+        Wg[j] = W[j]
+        pg[j] = p1[j]
+    t = 0.0
+    while True:
+        d = length - t
+        if d <= hmin:
+            step = d
+        else:
+            step = max(hmin, GRADE_RATIO * d)
+        thm = th0 + om * (tau + t + 0.5 * step - tg)
+        th1 = th0 + om * (tau + t + step - tg)
+        c1 = math.cos(th1)
+        s1 = math.sin(th1)
+        _rk4(qg, vg, Wg, M, tau + t, step, math.cos(thm), math.sin(thm), c1, s1, contact, K,
+             Dair, Dcon, S, dc, ds, yb, om, g0, gr, tg, fp, ag, pg, qe, ve, We, wk, pk)
+        t += step
+        if step == d:
+            return
+        for i in range(M):
+            qg[i] = qe[i]
+            vg[i] = ve[i]
+        for j in range(N_WORK):
+            Wg[j] = We[j]
+        _rhs(qg, vg, M, tau + t, c1, s1, contact, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, tg,
+             fp, ag, pg)
+
+
 @njit(cache=True, parallel=True)
 def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, grate, K,
                       Dair, Dcon, S, fp, W, dt, n_samples, substeps, q_out, v_out, f_out, c_out,
@@ -244,6 +296,14 @@ def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, 
         pk = np.empty((3, N_WORK))
         p1 = np.empty(N_WORK)
         pn = np.empty(N_WORK)
+        qg = np.empty(M)
+        vg = np.empty(M)
+        ag = np.empty(M)
+        Wg = np.empty(N_WORK)
+        pg = np.empty(N_WORK)
+        hmin = GRADE_MIN * h
+        grade_span = h / GRADE_RATIO
+        tau_ev = -1e300  # time of the last entry into contact
         Wn = np.empty(N_WORK)
         We = np.empty(N_WORK)
         chh = math.cos(0.5 * om * h)
@@ -269,12 +329,22 @@ def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, 
             for _sub in range(substeps):
                 t_end = tau + h
                 n_ev = 0
-                regular = True
+                fresh = True  # nothing integrated yet in this sub-step: hh == h exactly
                 while True:
                     hh = t_end - tau
                     if hh <= 0.0:
                         break
-                    if regular:
+                    full = True
+                    dist = tau - tau_ev
+                    if contact == 1 and zd > 0.0:
+                        # approaching a break: estimated time to it (linear in z)
+                        dist = min(dist, (a0 - brk - z) / zd)
+                    if dist < grade_span:
+                        gh = max(hmin, GRADE_RATIO * max(dist, 0.0))
+                        if gh < hh:
+                            hh = gh
+                            full = False
+                    if full and fresh:
                         cm = c * chh - s * shh
                         sm = s * chh + c * shh
                         c1 = cm * chh - sm * shh
@@ -290,6 +360,7 @@ def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, 
                          dcb, dsb, yb, om, gg, gr, tg, fpb, a1, p1, qn, vn, Wn, wk, pk)
                     z1, zd1, f1 = _rhs(qn, vn, M, tau + hh, c1, s1, contact, Kb, Da, Dc, Sb, dcb,
                                        dsb, yb, om, gg, gr, tg, fpb, an, pn)
+                    fresh = False
                     t_ev = -1.0
                     if has_contact and n_ev < MAX_EVENTS_PER_STEP:
                         zsw = a0 if contact == 0 else a0 - brk
@@ -309,20 +380,27 @@ def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, 
                         z = z1
                         zd = zd1
                         f = f1
-                        break
+                        if full:
+                            break
+                        continue
                     # ---- event: locate it on the RK4 map, switch regime, continue
                     n_ev += 1
                     zsw = a0 if contact == 0 else a0 - brk
                     hs = t_ev * hh
                     for _it in range(4):
-                        thm = th0 + om * (tau + 0.5 * hs - tg)
                         th1 = th0 + om * (tau + hs - tg)
-                        cme = math.cos(thm)
-                        sme = math.sin(thm)
                         c1e = math.cos(th1)
                         s1e = math.sin(th1)
-                        _rk4(q, v, Wb, M, tau, hs, cme, sme, c1e, s1e, contact, Kb, Da, Dc,
-                             Sb, dcb, dsb, yb, om, gg, gr, tg, fpb, a1, p1, qe, ve, We, wk, pk)
+                        if contact == 1:
+                            # leaving contact: the force is singular at the break point
+                            _graded_to_end(q, v, Wb, M, tau, hs, hmin, contact, Kb, Da, Dc, Sb,
+                                           dcb, dsb, yb, om, gg, gr, tg, th0, fpb, a1, p1, qe,
+                                           ve, We, qg, vg, Wg, ag, pg, wk, pk)
+                        else:
+                            thm = th0 + om * (tau + 0.5 * hs - tg)
+                            _rk4(q, v, Wb, M, tau, hs, math.cos(thm), math.sin(thm), c1e, s1e,
+                                 contact, Kb, Da, Dc, Sb, dcb, dsb, yb, om, gg, gr, tg, fpb, a1,
+                                 p1, qe, ve, We, wk, pk)
                         ze, zde = _gap(qe, ve, M, tau + hs, c1e, s1e, yb, om, gg, gr, tg)
                         err = ze - zsw
                         if abs(err) < 1e-14 or zde == 0.0:
@@ -340,10 +418,11 @@ def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, 
                     c = c1e
                     s = s1e
                     contact = 1 - contact
+                    if contact == 1:
+                        tau_ev = tau
                     z, zd, f = _rhs(q, v, M, tau, c, s, contact, Kb, Da, Dc, Sb, dcb, dsb, yb, om,
                                     gg, gr, tg, fpb, a1, p1)
-                    regular = False
-                # next sub-step starts regular again (c, s are exact at tau)
+                # after a graded or split step, c and s are exact at tau
         for i in range(M):
             q0[b, i] = q[i]
             v0[b, i] = v[i]

@@ -52,6 +52,12 @@ class RK4(AbstractIntegrator):
                 w = max(w, math.sqrt(float(s.cantilever.stiffness[-1]) + kc))
             elif c[L.JKR]:
                 w = max(w, math.sqrt(1.0 + c[L.JKR_ALPHA] * c[L.JKR_R] ** 1.5))
+            if c[L.LJ_REP] > 0.0:
+                # wall stiffness 6 c_a / z*^3 where repulsion balances attraction, x4 for
+                # taps that push further into the wall
+                ca = max(c[L.VDW], 1e-3)
+                zs = (c[L.LJ_REP] / ca) ** (1.0 / 6.0)
+                w = max(w, math.sqrt(1.0 + 24.0 * ca / zs**3))
         return max(1, math.ceil(self.steps_per_period * dt * w / (2.0 * math.pi)))
 
     def _advance(self, state: State, arrays, omega, gap_rate, dt, n_samples, substeps, out,

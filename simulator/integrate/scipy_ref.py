@@ -27,7 +27,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from ..system import System
-from ._kernel import N_WORK
+from ._kernel import EVENT_TOL, N_WORK
 from .base import AbstractIntegrator
 from .state import Segment, State
 
@@ -164,6 +164,10 @@ class SolveIVP(AbstractIntegrator):
 
         y = np.concatenate([state.q[b], state.v[b], np.zeros(N_WORK)])
         contact = int(state.contact[b])
+        if has_contact:  # a regime inconsistent with the start gap switches at once (as RK4)
+            z_start = kinematics(t0, y)[0]
+            if (z_start < a0 - EVENT_TOL) if not contact else (z_start > a0 - brk + EVENT_TOL):
+                contact = 1 - contact
         t = t0
         t_end = t0 + n_samples * dt
         times = t0 + dt * np.arange(n_samples)

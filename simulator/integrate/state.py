@@ -161,12 +161,14 @@ class Segment:
     @property
     def phase(self) -> NDArray[np.float64]:
         """Drive phase at each sample, shape (B, n)."""
-        return self.theta_start[:, None] + self.omega[:, None] * (self.tau - self.tau_start[:, None])
+        elapsed = self.tau - self.tau_start[:, None]
+        return self.theta_start[:, None] + self.omega[:, None] * elapsed
 
     @property
     def rest_gap(self) -> NDArray[np.float64]:
         """Rest gap ``g(tau)``, shape (B, n)."""
-        return self.gap_start[:, None] + self.gap_rate[:, None] * (self.tau - self.tau_start[:, None])
+        elapsed = self.tau - self.tau_start[:, None]
+        return self.gap_start[:, None] + self.gap_rate[:, None] * elapsed
 
     @property
     def gap(self) -> NDArray[np.float64]:

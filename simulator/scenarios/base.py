@@ -11,7 +11,7 @@ from ..forces.base import check_range
 from ..integrate.base import AbstractIntegrator
 from ..integrate.rk4 import RK4
 from ..integrate.state import Segment, State
-from ..labels import segment_labels
+from ..labels import trace_labels
 from ..system import System
 from .result import SimulationResult
 
@@ -56,32 +56,26 @@ def auto_settle_periods(system: System) -> float:
     return 2.5 * float(system.cantilever.quality_factors[0])
 
 
-def as_result(system: System, scenario: str, segs: list[Segment], meta: dict,
-              *, labels_from: list[Segment] | None = None) -> SimulationResult:
-    """Concatenate segments of one trajectory (batch index 0) into a result."""
+def as_result(system: System, scenario: str, segs: list[Segment], meta: dict) -> SimulationResult:
+    """Concatenate consecutive segments of one trajectory (batch index 0) into a result.
+
+    Labels are computed from the concatenated arrays (each segment keeps its own gap
+    programme), with the work integrals accumulated from the first start to the last end.
+    """
     q = np.concatenate([s.q[0] for s in segs], axis=-1)
     v = (np.concatenate([s.v[0] for s in segs], axis=-1) if segs[0].v is not None else None)
-    lab = segment_labels(_merge(segs))
+    force = np.concatenate([s.force[0] for s in segs])
+    gap = np.concatenate([s.gap[0] for s in segs])
+    phase = np.concatenate([s.phase[0] for s in segs])
+    omega = float(segs[0].omega[0])
+    lab = trace_labels(q=q, force=force, gap=gap, phase=phase,
+                       work=segs[-1].end.work[0] - segs[0].start.work[0], dt=segs[0].dt,
+                       omega=omega)
     return SimulationResult(
-        system=system, scenario=scenario, dt=segs[0].dt, omega=float(segs[0].omega[0]), q=q,
-        force=np.concatenate([s.force[0] for s in segs]),
-        gap=np.concatenate([s.gap[0] for s in segs]),
-        rest_gap=np.concatenate([s.rest_gap[0] for s in segs]),
-        contact=np.concatenate([s.contact[0] for s in segs]),
-        phase=np.concatenate([s.phase[0] for s in segs]), labels=lab, meta=meta, velocity=v)
-
-
-def _merge(segs: list[Segment]) -> Segment:
-    if len(segs) == 1:
-        return segs[0]
-    first, last = segs[0], segs[-1]
-    return Segment(
-        q=np.concatenate([s.q for s in segs], axis=-1), v=None,
-        force=np.concatenate([s.force for s in segs], axis=-1),
-        contact=np.concatenate([s.contact for s in segs], axis=-1),
-        tau_start=first.tau_start, theta_start=first.theta_start, gap_start=first.gap_start,
-        omega=first.omega, gap_rate=first.gap_rate, gap_modulation=first.gap_modulation,
-        dt=first.dt, start=first.start, end=last.end)
+        system=system, scenario=scenario, dt=segs[0].dt, omega=omega, q=q, force=force,
+        gap=gap, rest_gap=np.concatenate([s.rest_gap[0] for s in segs]),
+        contact=np.concatenate([s.contact[0] for s in segs]), phase=phase, labels=lab,
+        meta=meta, velocity=v)
 
 
 class AbstractScenario(abc.ABC):

@@ -153,3 +153,23 @@ def test_integrator_strategy_is_used(cl1):
     e4 = np.max(np.abs(runs[4] - runs[64]))
     e8 = np.max(np.abs(runs[8] - runs[64]))
     assert e4 / e8 > 10  # ~16 for 4th order
+
+
+def test_transient_labels_see_the_step(cl1):
+    """Labels of a multi-segment record use each segment's own gap (regression)."""
+    r = Transient(omega=1.0, gap=1.0, step=-0.3, periods_before=5, periods_after=100).run(
+        tapping(cl1))
+    assert r.labels["min_gap"] == pytest.approx(np.min(r.gap))
+    k = r.meta["step_index"]
+    assert np.min(r.gap[k:]) < np.min(r.gap[:k])  # closer surface: deeper taps after the step
+
+
+def test_electrostatic_is_held_at_contact():
+    """Long-range terms saturate at a0 in contact, so deep indentation stays finite."""
+    from simulator.forces import Electrostatic
+
+    f = DMT(a0=0.2, vdw=0.002, stiffness=20.0) + Electrostatic(strength=0.05, radius=1.0)
+    z = np.array([0.2, 0.1, 0.01, 1e-6])
+    contact = np.ones(4, dtype=bool)
+    es_part = f(z, 0.0, contact) - DMT(a0=0.2, vdw=0.002, stiffness=20.0)(z, 0.0, contact)
+    np.testing.assert_allclose(es_part, -0.05 / (0.2 * 1.2))

@@ -1,0 +1,49 @@
+"""Run every benchmark in turn; each refreshes its own section of ``docs/benchmarks.md``.
+
+Run: ``python benchmarks/run_all.py [--quick]`` (``--quick``: reduced sizes, smoke test only;
+its numbers are not the benchmark results). The sweet-spot study (``sweet_spot.py``) is not a
+benchmark and is run separately.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+FULL = [
+    ["bench_integrator.py"],
+    ["bench_vs_solve_ivp.py"],
+    ["bench_thesis_sweep.py"],
+]
+QUICK = [
+    ["bench_integrator.py", "--quick"],
+    ["bench_vs_solve_ivp.py", "--periods", "5", "--no-rk45"],
+    ["bench_thesis_sweep.py", "--points", "21", "--samples", "5000", "--baseline-freqs", "3",
+     "--baseline-periods", "3"],
+]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args(argv)
+    failed = []
+    for cmd in QUICK if args.quick else FULL:
+        t0 = time.time()
+        print(f"=== {' '.join(cmd)}", flush=True)
+        rc = subprocess.call([sys.executable, str(HERE / cmd[0]), *cmd[1:]], cwd=HERE.parent)
+        print(f"=== {cmd[0]}: exit {rc}, {time.time() - t0:.0f} s", flush=True)
+        if rc:
+            failed.append(cmd[0])
+    if failed:
+        print("failed:", ", ".join(failed))
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
