@@ -8,7 +8,7 @@ from typing import final
 from ..forces.base import check_range
 from ..integrate.state import State
 from ..system import System
-from .base import AbstractScenario, as_result, auto_settle_periods, settle
+from .base import AbstractScenario, as_result, settle
 from .result import SimulationResult
 
 __all__ = ["Approach"]
@@ -37,27 +37,21 @@ class Approach(AbstractScenario):
 
     def __init__(self, *, omega: float = 1.0, gap_start: float = 2.0, gap_end: float = 0.5,
                  n_periods: float = 2000.0, retract: bool = False,
-                 settle_periods: float | None = None, **kwargs) -> None:
+                 **kwargs) -> None:
         super().__init__(**kwargs)
         self.omega = check_range("omega", omega, low=0.0, low_open=True)
         self.gap_start = check_range("gap_start", gap_start, low=0.0, low_open=True)
         self.gap_end = check_range("gap_end", gap_end, low=0.0, low_open=True)
         self.n_periods = check_range("n_periods", n_periods, low=0.0, low_open=True)
         self.retract = bool(retract)
-        self.settle_periods = (None if settle_periods is None else
-                               check_range("settle_periods", settle_periods, low=0.0))
-
-    @property
-    def dt(self) -> float:
-        return 2.0 * math.pi / (self.omega * self.samples_per_period)
 
     def total_samples(self, system: System) -> int:
-        sp = auto_settle_periods(system) if self.settle_periods is None else self.settle_periods
+        sp = self.settle_periods_for(system)
         ramps = 2 if self.retract else 1
         return int(math.ceil((sp + ramps * self.n_periods) * self.samples_per_period))
 
     def run(self, system: System, *, progress=None) -> SimulationResult:
-        sp = auto_settle_periods(system) if self.settle_periods is None else self.settle_periods
+        sp = self.settle_periods_for(system)
         state = State.free_orbit(system, omega=self.omega, gap=self.gap_start)
         state = settle(system, state, integrator=self.integrator, omega=self.omega, dt=self.dt,
                        periods=sp, progress=progress)

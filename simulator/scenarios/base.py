@@ -83,21 +83,33 @@ class AbstractScenario(abc.ABC):
 
     Common settings: ``samples_per_period`` (sampling rate in samples per drive period, or per
     free-resonance period for sweeps), ``integrator`` (default :class:`RK4` automatic),
-    ``record_velocity``.
+    ``record_velocity``, ``settle_periods`` (drive periods integrated before recording;
+    ``None``: ``2.5 Q_1``).
     """
 
     name = "abstract"
 
     def __init__(self, *, samples_per_period: float = 200.0,
                  integrator: AbstractIntegrator | None = None,
-                 record_velocity: bool = False) -> None:
+                 record_velocity: bool = False, settle_periods: float | None = None) -> None:
         self.samples_per_period = check_range("samples_per_period", samples_per_period,
                                               low=4.0)
+        self.settle_periods = (None if settle_periods is None else
+                               check_range("settle_periods", settle_periods, low=0.0))
         self.integrator = integrator if integrator is not None else RK4()
         if not isinstance(self.integrator, AbstractIntegrator):
             raise ValueError("integrator must be an AbstractIntegrator, got "
                              f"{type(self.integrator).__name__}")
         self.record_velocity = bool(record_velocity)
+
+    @property
+    def dt(self) -> float:
+        """Sample interval (dimensionless): ``2 pi / (omega samples_per_period)``."""
+        return 2.0 * math.pi / (self.omega * self.samples_per_period)
+
+    def settle_periods_for(self, system: System) -> float:
+        """Settling periods: the setting, or ``2.5 Q_1`` when it is ``None``."""
+        return auto_settle_periods(system) if self.settle_periods is None else self.settle_periods
 
     @abc.abstractmethod
     def run(self, system: System, *, progress=None) -> SimulationResult:

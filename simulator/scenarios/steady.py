@@ -8,7 +8,7 @@ from typing import final
 from ..forces.base import check_range
 from ..integrate.state import State
 from ..system import System
-from .base import AbstractScenario, as_result, auto_settle_periods, settle
+from .base import AbstractScenario, as_result, settle
 from .result import SimulationResult
 
 __all__ = ["SteadyState"]
@@ -38,29 +38,20 @@ class SteadyState(AbstractScenario):
     name = "steady"
 
     def __init__(self, *, omega: float = 1.0, gap: float = 1.0, n_periods: float = 100.0,
-                 settle_periods: float | None = None, **kwargs) -> None:
+                 **kwargs) -> None:
         super().__init__(**kwargs)
         self.omega = check_range("omega", omega, low=0.0, low_open=True)
         self.gap = check_range("gap", gap, low=0.0, low_open=True)
         self.n_periods = check_range("n_periods", n_periods, low=0.0, low_open=True)
-        self.settle_periods = (None if settle_periods is None else
-                               check_range("settle_periods", settle_periods, low=0.0))
-
-    @property
-    def dt(self) -> float:
-        return 2.0 * math.pi / (self.omega * self.samples_per_period)
-
-    def _settle_periods(self, system: System) -> float:
-        return auto_settle_periods(system) if self.settle_periods is None else self.settle_periods
 
     def total_samples(self, system: System) -> int:
-        return int(math.ceil((self._settle_periods(system) + self.n_periods)
+        return int(math.ceil((self.settle_periods_for(system) + self.n_periods)
                              * self.samples_per_period))
 
     def run(self, system: System, *, progress=None) -> SimulationResult:
         state = State.free_orbit(system, omega=self.omega, gap=self.gap)
         state = settle(system, state, integrator=self.integrator, omega=self.omega, dt=self.dt,
-                       periods=self._settle_periods(system), progress=progress)
+                       periods=self.settle_periods_for(system), progress=progress)
         n = int(round(self.n_periods * self.samples_per_period))
         seg = self.integrator.run(system, state, omega=self.omega, n_samples=n, dt=self.dt,
                                   record_velocity=self.record_velocity)

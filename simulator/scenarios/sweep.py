@@ -14,7 +14,7 @@ from ..forces.base import check_range
 from ..integrate.state import Segment, State
 from ..labels import segment_labels
 from ..system import System
-from .base import AbstractScenario, auto_settle_periods
+from .base import AbstractScenario
 from .result import SimulationResult
 
 __all__ = ["Sweep", "SweepPoint", "stack_labels"]
@@ -107,7 +107,7 @@ class Sweep(AbstractScenario):
     def __init__(self, *, omega_start: float = 0.99, omega_stop: float = 1.13,
                  n_points: int = 101, samples_per_point: int = 20_000, settle_samples: int = 0,
                  direction: str = "both", gap: float = 1.0,
-                 settle_periods: float | None = None, **kwargs) -> None:
+                 **kwargs) -> None:
         kwargs.setdefault("samples_per_period", 1500.0)
         super().__init__(**kwargs)
         self.omega_start = check_range("omega_start", omega_start, low=0.0, low_open=True)
@@ -120,8 +120,6 @@ class Sweep(AbstractScenario):
             raise ValueError(f"direction must be one of {_DIRECTIONS}, got {direction!r}")
         self.direction = direction
         self.gap = check_range("gap", gap, low=0.0, low_open=True)
-        self.settle_periods = (None if settle_periods is None else
-                               check_range("settle_periods", settle_periods, low=0.0))
 
     @property
     def dt(self) -> float:
@@ -146,7 +144,7 @@ class Sweep(AbstractScenario):
         return np.concatenate([w if d == "forward" else w[::-1] for d in self.directions])
 
     def total_samples(self, system: System) -> int:
-        sp = auto_settle_periods(system) if self.settle_periods is None else self.settle_periods
+        sp = self.settle_periods_for(system)
         settle_n = sp * self.samples_per_period / self.omega_start
         return int(math.ceil(settle_n + self.n_points * (self.samples_per_point
                                                          + self.settle_samples)))
@@ -157,7 +155,7 @@ class Sweep(AbstractScenario):
         dirs = self.directions
         schedule = np.stack([w if d == "forward" else w[::-1] for d in dirs])  # (B, P)
         state = State.free_orbit(system, omega=schedule[:, 0], gap=self.gap)
-        sp = auto_settle_periods(system) if self.settle_periods is None else self.settle_periods
+        sp = self.settle_periods_for(system)
         # settle each direction at its first frequency (batch members may differ)
         n_set = int(math.ceil(sp * 2.0 * math.pi / (float(schedule[:, 0].min()) * self.dt)))
         state = _settle_batch(system, state, self, schedule[:, 0], n_set, progress)

@@ -8,7 +8,7 @@ from typing import final
 from ..forces.base import check_range
 from ..integrate.state import State
 from ..system import System
-from .base import AbstractScenario, as_result, auto_settle_periods, settle, sync_contact
+from .base import AbstractScenario, as_result, settle, sync_contact
 from .result import SimulationResult
 
 __all__ = ["Transient"]
@@ -37,27 +37,21 @@ class Transient(AbstractScenario):
 
     def __init__(self, *, omega: float = 1.0, gap: float = 1.0, step: float = -0.2,
                  periods_before: float = 20.0, periods_after: float = 200.0,
-                 settle_periods: float | None = None, **kwargs) -> None:
+                 **kwargs) -> None:
         super().__init__(**kwargs)
         self.omega = check_range("omega", omega, low=0.0, low_open=True)
         self.gap = check_range("gap", gap, low=0.0, low_open=True)
         self.step = check_range("step", step, low=-self.gap, high=math.inf, low_open=True)
         self.periods_before = check_range("periods_before", periods_before, low=0.0)
         self.periods_after = check_range("periods_after", periods_after, low=0.0, low_open=True)
-        self.settle_periods = (None if settle_periods is None else
-                               check_range("settle_periods", settle_periods, low=0.0))
-
-    @property
-    def dt(self) -> float:
-        return 2.0 * math.pi / (self.omega * self.samples_per_period)
 
     def total_samples(self, system: System) -> int:
-        sp = auto_settle_periods(system) if self.settle_periods is None else self.settle_periods
+        sp = self.settle_periods_for(system)
         return int(math.ceil((sp + self.periods_before + self.periods_after)
                              * self.samples_per_period))
 
     def run(self, system: System, *, progress=None) -> SimulationResult:
-        sp = auto_settle_periods(system) if self.settle_periods is None else self.settle_periods
+        sp = self.settle_periods_for(system)
         state = State.free_orbit(system, omega=self.omega, gap=self.gap)
         state = settle(system, state, integrator=self.integrator, omega=self.omega, dt=self.dt,
                        periods=sp, progress=progress)
