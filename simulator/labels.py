@@ -51,12 +51,15 @@ def coupling_strength(q: NDArray[np.float64]) -> float:
 def segment_labels(seg: Segment, b: int = 0) -> dict[str, Any]:
     """Scalar labels of trajectory ``b`` of a recorded segment."""
     return trace_labels(q=seg.q[b], force=seg.force[b], gap=seg.gap[b], phase=seg.phase[b],
-                        work=seg.work[b], dt=seg.dt, omega=float(seg.omega[b]))
+                        work=seg.work[b], dt=seg.dt, omega=float(seg.omega[b]),
+                        drive_cos=seg.drive_cos[b], drive_sin=seg.drive_sin[b])
 
 
 def trace_labels(*, q: NDArray[np.float64], force: NDArray[np.float64],
                  gap: NDArray[np.float64], phase: NDArray[np.float64],
-                 work: NDArray[np.float64], dt: float, omega: float) -> dict[str, Any]:
+                 work: NDArray[np.float64], dt: float, omega: float,
+                 drive_cos: NDArray[np.float64] | None = None,
+                 drive_sin: NDArray[np.float64] | None = None) -> dict[str, Any]:
     """Scalar labels of one recorded trace.
 
     Parameters
@@ -71,6 +74,8 @@ def trace_labels(*, q: NDArray[np.float64], force: NDArray[np.float64],
         Sample interval.
     omega : float
         Drive frequency.
+    drive_cos, drive_sin : ndarray, shape (n,), optional
+        ``cos(phase)``, ``sin(phase)`` if already computed (saves the complex lock-in).
     """
     n = q.shape[-1]
     duration = n * dt
@@ -89,7 +94,11 @@ def trace_labels(*, q: NDArray[np.float64], force: NDArray[np.float64],
     # lock-in over whole periods only
     n_whole = int(math.floor(cycles) * (2.0 * math.pi / omega) / dt)
     sl = slice(0, n_whole if n_whole > 0 else n)
-    a1 = lock_in(x[sl], phase[sl])
+    if drive_cos is not None and drive_sin is not None:
+        xs = x[sl]
+        a1 = complex(2.0 * np.mean(xs * drive_cos[sl]), -2.0 * np.mean(xs * drive_sin[sl]))
+    else:
+        a1 = lock_in(x[sl], phase[sl])
     return {
         "dissipated_energy": float(work[3] / cycles) if cycles > 0 else 0.0,
         "drive_energy": float(work[0] / cycles) if cycles > 0 else 0.0,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import final
 
 import numpy as np
@@ -128,6 +129,10 @@ class Segment:
         Sample interval.
     start, end : State
         States at the start and end of the segment.
+
+    Derived arrays (``tau``, ``deflection``, ``phase``, ``drive_cos``, ``drive_sin``,
+    ``rest_gap``, ``gap``) are computed
+    once, on first access, for the whole batch.
     """
 
     q: NDArray[np.float64]
@@ -148,32 +153,42 @@ class Segment:
     def n_samples(self) -> int:
         return self.q.shape[-1]
 
-    @property
+    @cached_property
     def tau(self) -> NDArray[np.float64]:
         """Sample times, shape (B, n)."""
         return self.tau_start[:, None] + self.dt * np.arange(self.n_samples)[None, :]
 
-    @property
+    @cached_property
     def deflection(self) -> NDArray[np.float64]:
         """Tip deflection ``x = sum_i q_i``, shape (B, n)."""
         return self.q.sum(axis=1)
 
-    @property
+    @cached_property
     def phase(self) -> NDArray[np.float64]:
         """Drive phase at each sample, shape (B, n)."""
         elapsed = self.tau - self.tau_start[:, None]
         return self.theta_start[:, None] + self.omega[:, None] * elapsed
 
-    @property
+    @cached_property
+    def drive_cos(self) -> NDArray[np.float64]:
+        """``cos(theta)`` at each sample, shape (B, n)."""
+        return np.cos(self.phase)
+
+    @cached_property
+    def drive_sin(self) -> NDArray[np.float64]:
+        """``sin(theta)`` at each sample, shape (B, n)."""
+        return np.sin(self.phase)
+
+    @cached_property
     def rest_gap(self) -> NDArray[np.float64]:
         """Rest gap ``g(tau)``, shape (B, n)."""
         elapsed = self.tau - self.tau_start[:, None]
         return self.gap_start[:, None] + self.gap_rate[:, None] * elapsed
 
-    @property
+    @cached_property
     def gap(self) -> NDArray[np.float64]:
         """Instantaneous tip--sample gap ``z``, shape (B, n)."""
-        return self.rest_gap - self.deflection - self.gap_modulation[:, None] * np.sin(self.phase)
+        return self.rest_gap - self.deflection - self.gap_modulation[:, None] * self.drive_sin
 
     @property
     def work(self) -> NDArray[np.float64]:
