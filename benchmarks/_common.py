@@ -139,13 +139,21 @@ def command_line() -> str:
     return f"cd {ROOT.name} && python {rel}{(' ' + args) if args else ''}"
 
 
+def add_doc_flag(parser) -> None:
+    """``--no-doc``: print the section only (smoke runs must not overwrite the results)."""
+    parser.add_argument("--no-doc", action="store_true",
+                        help="print the results without updating docs/benchmarks.md")
+
+
 def write_section(name: str, title: str, body: str, info: dict[str, str],
-                  *, command: str | None = None) -> str:
+                  *, command: str | None = None, write: bool = True) -> str:
     """Print the section and write it into ``docs/benchmarks.md`` (replacing an old one)."""
     cmd = command or command_line()
     text = (f"<!-- BEGIN {name} -->\n## {title}\n\n"
             f"Command: `{cmd}`\n\n{machine_block(info)}\n\n{body.strip()}\n<!-- END {name} -->")
     print(text)
+    if not write:
+        return text
     DOC.parent.mkdir(parents=True, exist_ok=True)
     old = DOC.read_text() if DOC.exists() else _HEADER
     pat = re.compile(rf"<!-- BEGIN {re.escape(name)} -->.*?<!-- END {re.escape(name)} -->",

@@ -70,6 +70,7 @@ def throughput(n_modes: int, batch: int, *, steps_target: float, repeat: int) ->
 def main(argv: list[str] | None = None) -> str:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer steps, no compile-time runs")
+    C.add_doc_flag(ap)
     args = ap.parse_args(argv)
     info = C.machine_info()
     target = 1e6 if args.quick else 8e6
@@ -105,7 +106,7 @@ def main(argv: list[str] | None = None) -> str:
                  "(`cache=True`). Neither is included in the throughput above.", "",
                  C.md_table(["model", "cold compile [s]", "cached load [s]"], comp)]
     return C.write_section("bench_integrator", "Integrator throughput (`bench_integrator.py`)",
-                           "\n".join(body), info)
+                           "\n".join(body), info, write=not args.no_doc)
 
 
 if __name__ == "__main__":

@@ -150,6 +150,7 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--points", type=int, default=501, help="smoke tests only (thesis: 501)")
     ap.add_argument("--samples", type=int, default=50_000,
                     help="smoke tests only (thesis: 50,000)")
+    C.add_doc_flag(ap)
     args = ap.parse_args(argv)
     global N_POINTS, N_SAMPLES
     N_POINTS, N_SAMPLES = args.points, args.samples
@@ -225,7 +226,7 @@ def main(argv: list[str] | None = None) -> str:
             "per period (also an extrapolation).",
         ]
     return C.write_section("bench_thesis_sweep", "Thesis-scale sweep (`bench_thesis_sweep.py`)",
-                           "\n".join(body), info)
+                           "\n".join(body), info, write=not args.no_doc)
 
 
 if __name__ == "__main__":

@@ -127,6 +127,7 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--periods", type=float, default=50.0)
     ap.add_argument("--out", type=int, default=100, help="output samples per drive period")
     ap.add_argument("--no-rk45", action="store_true", help="skip RK45 (slowest candidate)")
+    C.add_doc_flag(ap)
     args = ap.parse_args(argv)
     info = C.machine_info()
     rows, ladders, notes, tau_rows, tau_late = [], [], [], [], None
@@ -164,7 +165,7 @@ def main(argv: list[str] | None = None) -> str:
     ]
     return C.write_section("bench_vs_solve_ivp",
                            "RK4 vs solve_ivp at matched accuracy (`bench_vs_solve_ivp.py`)",
-                           "\n".join(body), info)
+                           "\n".join(body), info, write=not args.no_doc)
 
 
 if __name__ == "__main__":

@@ -1,8 +1,8 @@
 """Run every benchmark in turn; each refreshes its own section of ``docs/benchmarks.md``.
 
-Run: ``python benchmarks/run_all.py [--quick]`` (``--quick``: reduced sizes, smoke test only;
-its numbers are not the benchmark results). The sweet-spot study (``sweet_spot.py``) is not a
-benchmark and is run separately.
+Run: ``python benchmarks/run_all.py [--quick]`` (``--quick``: reduced sizes, a smoke test
+that prints but does not touch ``docs/benchmarks.md``). The sweet-spot study
+(``sweet_spot.py``) is not a benchmark and is run separately.
 """
 
 from __future__ import annotations
@@ -21,10 +21,10 @@ FULL = [
     ["bench_thesis_sweep.py"],
 ]
 QUICK = [
-    ["bench_integrator.py", "--quick"],
-    ["bench_vs_solve_ivp.py", "--periods", "5", "--no-rk45"],
+    ["bench_integrator.py", "--quick", "--no-doc"],
+    ["bench_vs_solve_ivp.py", "--periods", "5", "--no-rk45", "--no-doc"],
     ["bench_thesis_sweep.py", "--points", "21", "--samples", "5000", "--baseline-freqs", "3",
-     "--baseline-periods", "3"],
+     "--baseline-periods", "3", "--no-doc"],
 ]
 
 
