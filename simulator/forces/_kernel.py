@@ -15,7 +15,7 @@ from numba import njit
 from . import _layout as L
 
 
-@njit(cache=True, inline="always", _nrt=False)
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
 def signed_pow(d: float, p: float) -> float:
     """Odd extension ``sign(d) * |d|**p`` with fast paths for p = 1, 1.5, 2, 0.5."""
     if p == 1.5:
@@ -29,7 +29,7 @@ def signed_pow(d: float, p: float) -> float:
     return math.copysign(abs(d) ** p, d)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, error_model="numpy", _nrt=False)
 def jkr_contact_radius_sqrt(delta: float, r_j: float, c_j: float) -> float:
     """Square root ``s = sqrt(a)`` of the JKR contact radius for indentation ``delta``.
 
@@ -56,7 +56,7 @@ def jkr_contact_radius_sqrt(delta: float, r_j: float, c_j: float) -> float:
     return s
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, error_model="numpy", _nrt=False)
 def ts_force(z: float, zdot: float, contact: int, p) -> float:
     """Tip--sample force (dimensionless, > 0 repulsive) at gap ``z`` and gap rate ``zdot``.
 

@@ -226,185 +226,6 @@ def _graded_to_end(q, v, W, M, tau, length, hmin, contact, K, Dair, Dcon, S, dc,
              fp, ag, pg)
 
 
-@njit(cache=True)
-def _integrate_one(b, q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, grate, K, Dair,
-                   Dcon, S, fp, W, dt, n_samples, substeps, q_out, v_out, f_out, c_out,
-                   record_velocity):
-    """Trajectory ``b`` of :func:`integrate_segment` (time kept relative to the segment start,
-    exact at every sub-step boundary, so long runs do not drift the drive phase)."""
-    M = q0.shape[1]
-    h = dt / substeps
-    q = q0[b].copy()
-    v = v0[b].copy()
-    Wb = W[b].copy()
-    contact = np.int64(contact0[b])
-    tau = 0.0  # relative to the segment start
-    tg = 0.0
-    th0 = theta0[b]
-    om = omega[b]
-    yb = ybase[b]
-    gg = g0[b]
-    gr = grate[b]
-    Kb = K[b]
-    Da = Dair[b]
-    Dc = Dcon[b]
-    Sb = S[b]
-    dcb = dc[b]
-    dsb = ds[b]
-    fpb = fp[b]
-    has_contact = fpb[L.CONTACT] != 0.0
-    a0 = fpb[L.A0]
-    brk = fpb[L.BREAK]
-    a1 = np.empty(M)
-    an = np.empty(M)
-    qn = np.empty(M)
-    vn = np.empty(M)
-    qe = np.empty(M)
-    ve = np.empty(M)
-    wk = np.empty((8, M))
-    pk = np.empty((3, N_WORK))
-    p1 = np.empty(N_WORK)
-    pn = np.empty(N_WORK)
-    qg = np.empty(M)
-    vg = np.empty(M)
-    ag = np.empty(M)
-    Wg = np.empty(N_WORK)
-    pg = np.empty(N_WORK)
-    hmin = GRADE_MIN * h
-    grade_span = h / GRADE_RATIO
-    tau_ev = -1e300  # time of the last entry into contact
-    Wn = np.empty(N_WORK)
-    We = np.empty(N_WORK)
-    chh = math.cos(0.5 * om * h)
-    shh = math.sin(0.5 * om * h)
-    th = th0
-    c = math.cos(th)
-    s = math.sin(th)
-    z, zd, f = _rhs(q, v, M, tau, c, s, contact, Kb, Da, Dc, Sb, dcb, dsb, yb, om, gg, gr, tg,
-                    fpb, a1, p1)
-    for k in range(n_samples):
-        for i in range(M):
-            q_out[b, i, k] = q[i]
-        if record_velocity:
-            for i in range(M):
-                v_out[b, i, k] = v[i]
-        f_out[b, k] = f
-        c_out[b, k] = contact
-        # drive cos/sin advance by rotation; re-synchronised exactly every 64 samples
-        if k % 64 == 0:
-            th = th0 + om * (k * dt)
-            c = math.cos(th)
-            s = math.sin(th)
-        for _sub in range(substeps):
-            tau = (k * substeps + _sub) * h
-            t_end = tau + h
-            n_ev = 0
-            fresh = True  # nothing integrated yet in this sub-step: hh == h exactly
-            while True:
-                hh = t_end - tau
-                if hh <= 0.0:
-                    break
-                full = True
-                dist = tau - tau_ev
-                if contact == 1 and zd > 0.0:
-                    # approaching a break: estimated time to it (linear in z)
-                    dist = min(dist, (a0 - brk - z) / zd)
-                if dist < grade_span:
-                    gh = max(hmin, GRADE_RATIO * max(dist, 0.0))
-                    if gh < hh:
-                        hh = gh
-                        full = False
-                if full and fresh:
-                    cm = c * chh - s * shh
-                    sm = s * chh + c * shh
-                    c1 = cm * chh - sm * shh
-                    s1 = sm * chh + cm * shh
-                else:
-                    thm = th0 + om * (tau + 0.5 * hh - tg)
-                    th1 = th0 + om * (tau + hh - tg)
-                    cm = math.cos(thm)
-                    sm = math.sin(thm)
-                    c1 = math.cos(th1)
-                    s1 = math.sin(th1)
-                _rk4(q, v, Wb, M, tau, hh, cm, sm, c1, s1, contact, Kb, Da, Dc, Sb,
-                     dcb, dsb, yb, om, gg, gr, tg, fpb, a1, p1, qn, vn, Wn, wk, pk)
-                z1, zd1, f1 = _rhs(qn, vn, M, tau + hh, c1, s1, contact, Kb, Da, Dc, Sb, dcb,
-                                   dsb, yb, om, gg, gr, tg, fpb, an, pn)
-                fresh = False
-                t_ev = -1.0
-                if has_contact and n_ev < MAX_EVENTS_PER_STEP:
-                    zsw = a0 if contact == 0 else a0 - brk
-                    sgn = 1.0 if contact == 0 else -1.0
-                    t_ev = _first_crossing(z - zsw, z1 - zsw, zd * hh, zd1 * hh, sgn)
-                if t_ev < 0.0:
-                    for i in range(M):
-                        q[i] = qn[i]
-                        v[i] = vn[i]
-                        a1[i] = an[i]
-                    for j in range(N_WORK):
-                        Wb[j] = Wn[j]
-                        p1[j] = pn[j]
-                    tau = tau + hh
-                    c = c1
-                    s = s1
-                    z = z1
-                    zd = zd1
-                    f = f1
-                    if full:
-                        break
-                    continue
-                # ---- event: locate it on the RK4 map, switch regime, continue
-                n_ev += 1
-                zsw = a0 if contact == 0 else a0 - brk
-                hs = t_ev * hh
-                for _it in range(4):
-                    th1 = th0 + om * (tau + hs - tg)
-                    c1e = math.cos(th1)
-                    s1e = math.sin(th1)
-                    if contact == 1:
-                        # leaving contact: the force is singular at the break point
-                        _graded_to_end(q, v, Wb, M, tau, hs, hmin, contact, Kb, Da, Dc, Sb,
-                                       dcb, dsb, yb, om, gg, gr, tg, th0, fpb, a1, p1, qe,
-                                       ve, We, qg, vg, Wg, ag, pg, wk, pk)
-                    else:
-                        thm = th0 + om * (tau + 0.5 * hs - tg)
-                        _rk4(q, v, Wb, M, tau, hs, math.cos(thm), math.sin(thm), c1e, s1e,
-                             contact, Kb, Da, Dc, Sb, dcb, dsb, yb, om, gg, gr, tg, fpb, a1,
-                             p1, qe, ve, We, wk, pk)
-                    ze, zde = _gap(qe, ve, M, tau + hs, c1e, s1e, yb, om, gg, gr, tg)
-                    err = ze - zsw
-                    if abs(err) < 1e-14 or zde == 0.0:
-                        break
-                    hn = hs - err / zde
-                    if hn <= 0.0 or hn > hh:
-                        break
-                    hs = hn
-                for i in range(M):
-                    q[i] = qe[i]
-                    v[i] = ve[i]
-                for j in range(N_WORK):
-                    Wb[j] = We[j]
-                tau = tau + hs
-                c = c1e
-                s = s1e
-                contact = 1 - contact
-                if contact == 1:
-                    tau_ev = tau
-                z, zd, f = _rhs(q, v, M, tau, c, s, contact, Kb, Da, Dc, Sb, dcb, dsb, yb, om,
-                                gg, gr, tg, fpb, a1, p1)
-            # after a graded or split step, c and s are exact at tau
-    for i in range(M):
-        q0[b, i] = q[i]
-        v0[b, i] = v[i]
-    for j in range(N_WORK):
-        W[b, j] = Wb[j]
-    contact0[b] = contact
-    t_total = n_samples * dt
-    theta0[b] = (th0 + om * t_total) % (2.0 * math.pi)
-    g0[b] = gg + gr * t_total
-    tau0[b] = tau0[b] + t_total
-
-
 @njit(cache=True, parallel=True)
 def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, grate, K,
                       Dair, Dcon, S, fp, W, dt, n_samples, substeps, q_out, v_out, f_out, c_out,
@@ -418,7 +239,9 @@ def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, 
     contact0 : int8 (B,)
         Contact regime (updated).
     tau0 : float64 (B,)
-        Start time (updated to the end time); the gap ramp is referenced to the start time.
+        Start time (updated to the end time). Inside, time is kept relative to the segment
+        start and recomputed exactly at every sub-step boundary, so long runs do not drift the
+        drive phase.
     theta0 : float64 (B,)
         Drive phase at ``tau0`` (updated, wrapped to [0, 2 pi)).
     omega : float64 (B,)
@@ -441,18 +264,175 @@ def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, 
     f_out : float64 (B, n_samples); c_out : int8 (B, n_samples)
         Recorded at ``tau0 + k dt``, k = 0 .. n_samples - 1 (before each interval).
     """
-    for b in prange(q0.shape[0]):
-        _integrate_one(b, q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, grate, K,
-                       Dair, Dcon, S, fp, W, dt, n_samples, substeps, q_out, v_out, f_out,
-                       c_out, record_velocity)
-
-
-@njit(cache=True)
-def integrate_segment_serial(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, grate, K,
-                             Dair, Dcon, S, fp, W, dt, n_samples, substeps, q_out, v_out, f_out,
-                             c_out, record_velocity):
-    """Same as :func:`integrate_segment` on one thread (no thread-pool launch for B = 1)."""
-    for b in range(q0.shape[0]):
-        _integrate_one(b, q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, grate, K,
-                       Dair, Dcon, S, fp, W, dt, n_samples, substeps, q_out, v_out, f_out,
-                       c_out, record_velocity)
+    B, M = q0.shape
+    h = dt / substeps
+    for b in prange(B):
+        q = q0[b].copy()
+        v = v0[b].copy()
+        Wb = W[b].copy()
+        contact = np.int64(contact0[b])
+        tau = 0.0  # time relative to the segment start (exact at sub-step boundaries)
+        tg = 0.0
+        th0 = theta0[b]
+        om = omega[b]
+        yb = ybase[b]
+        gg = g0[b]
+        gr = grate[b]
+        Kb = K[b]
+        Da = Dair[b]
+        Dc = Dcon[b]
+        Sb = S[b]
+        dcb = dc[b]
+        dsb = ds[b]
+        fpb = fp[b]
+        has_contact = fpb[L.CONTACT] != 0.0
+        a0 = fpb[L.A0]
+        brk = fpb[L.BREAK]
+        a1 = np.empty(M)
+        an = np.empty(M)
+        qn = np.empty(M)
+        vn = np.empty(M)
+        qe = np.empty(M)
+        ve = np.empty(M)
+        wk = np.empty((8, M))
+        pk = np.empty((3, N_WORK))
+        p1 = np.empty(N_WORK)
+        pn = np.empty(N_WORK)
+        qg = np.empty(M)
+        vg = np.empty(M)
+        ag = np.empty(M)
+        Wg = np.empty(N_WORK)
+        pg = np.empty(N_WORK)
+        hmin = GRADE_MIN * h
+        grade_span = h / GRADE_RATIO
+        tau_ev = -1e300  # time of the last entry into contact
+        Wn = np.empty(N_WORK)
+        We = np.empty(N_WORK)
+        chh = math.cos(0.5 * om * h)
+        shh = math.sin(0.5 * om * h)
+        th = th0
+        c = math.cos(th)
+        s = math.sin(th)
+        z, zd, f = _rhs(q, v, M, tau, c, s, contact, Kb, Da, Dc, Sb, dcb, dsb, yb, om, gg, gr, tg,
+                        fpb, a1, p1)
+        for k in range(n_samples):
+            for i in range(M):
+                q_out[b, i, k] = q[i]
+            if record_velocity:
+                for i in range(M):
+                    v_out[b, i, k] = v[i]
+            f_out[b, k] = f
+            c_out[b, k] = contact
+            # drive cos/sin advance by rotation; re-synchronised exactly every 64 samples
+            if k % 64 == 0:
+                th = th0 + om * (k * dt)
+                c = math.cos(th)
+                s = math.sin(th)
+            for _sub in range(substeps):
+                tau = (k * substeps + _sub) * h
+                t_end = tau + h
+                n_ev = 0
+                fresh = True  # nothing integrated yet in this sub-step: hh == h exactly
+                while True:
+                    hh = t_end - tau
+                    if hh <= 0.0:
+                        break
+                    full = True
+                    dist = tau - tau_ev
+                    if contact == 1 and zd > 0.0:
+                        # approaching a break: estimated time to it (linear in z)
+                        dist = min(dist, (a0 - brk - z) / zd)
+                    if dist < grade_span:
+                        gh = max(hmin, GRADE_RATIO * max(dist, 0.0))
+                        if gh < hh:
+                            hh = gh
+                            full = False
+                    if full and fresh:
+                        cm = c * chh - s * shh
+                        sm = s * chh + c * shh
+                        c1 = cm * chh - sm * shh
+                        s1 = sm * chh + cm * shh
+                    else:
+                        thm = th0 + om * (tau + 0.5 * hh - tg)
+                        th1 = th0 + om * (tau + hh - tg)
+                        cm = math.cos(thm)
+                        sm = math.sin(thm)
+                        c1 = math.cos(th1)
+                        s1 = math.sin(th1)
+                    _rk4(q, v, Wb, M, tau, hh, cm, sm, c1, s1, contact, Kb, Da, Dc, Sb,
+                         dcb, dsb, yb, om, gg, gr, tg, fpb, a1, p1, qn, vn, Wn, wk, pk)
+                    z1, zd1, f1 = _rhs(qn, vn, M, tau + hh, c1, s1, contact, Kb, Da, Dc, Sb, dcb,
+                                       dsb, yb, om, gg, gr, tg, fpb, an, pn)
+                    fresh = False
+                    t_ev = -1.0
+                    if has_contact and n_ev < MAX_EVENTS_PER_STEP:
+                        zsw = a0 if contact == 0 else a0 - brk
+                        sgn = 1.0 if contact == 0 else -1.0
+                        t_ev = _first_crossing(z - zsw, z1 - zsw, zd * hh, zd1 * hh, sgn)
+                    if t_ev < 0.0:
+                        for i in range(M):
+                            q[i] = qn[i]
+                            v[i] = vn[i]
+                            a1[i] = an[i]
+                        for j in range(N_WORK):
+                            Wb[j] = Wn[j]
+                            p1[j] = pn[j]
+                        tau = tau + hh
+                        c = c1
+                        s = s1
+                        z = z1
+                        zd = zd1
+                        f = f1
+                        if full:
+                            break
+                        continue
+                    # ---- event: locate it on the RK4 map, switch regime, continue
+                    n_ev += 1
+                    zsw = a0 if contact == 0 else a0 - brk
+                    hs = t_ev * hh
+                    for _it in range(4):
+                        th1 = th0 + om * (tau + hs - tg)
+                        c1e = math.cos(th1)
+                        s1e = math.sin(th1)
+                        if contact == 1:
+                            # leaving contact: the force is singular at the break point
+                            _graded_to_end(q, v, Wb, M, tau, hs, hmin, contact, Kb, Da, Dc, Sb,
+                                           dcb, dsb, yb, om, gg, gr, tg, th0, fpb, a1, p1, qe,
+                                           ve, We, qg, vg, Wg, ag, pg, wk, pk)
+                        else:
+                            thm = th0 + om * (tau + 0.5 * hs - tg)
+                            _rk4(q, v, Wb, M, tau, hs, math.cos(thm), math.sin(thm), c1e, s1e,
+                                 contact, Kb, Da, Dc, Sb, dcb, dsb, yb, om, gg, gr, tg, fpb, a1,
+                                 p1, qe, ve, We, wk, pk)
+                        ze, zde = _gap(qe, ve, M, tau + hs, c1e, s1e, yb, om, gg, gr, tg)
+                        err = ze - zsw
+                        if abs(err) < 1e-14 or zde == 0.0:
+                            break
+                        hn = hs - err / zde
+                        if hn <= 0.0 or hn > hh:
+                            break
+                        hs = hn
+                    for i in range(M):
+                        q[i] = qe[i]
+                        v[i] = ve[i]
+                    for j in range(N_WORK):
+                        Wb[j] = We[j]
+                    tau = tau + hs
+                    c = c1e
+                    s = s1e
+                    contact = 1 - contact
+                    if contact == 1:
+                        tau_ev = tau
+                    z, zd, f = _rhs(q, v, M, tau, c, s, contact, Kb, Da, Dc, Sb, dcb, dsb, yb, om,
+                                    gg, gr, tg, fpb, a1, p1)
+                # after a graded or split step, c and s are exact at tau
+        for i in range(M):
+            q0[b, i] = q[i]
+            v0[b, i] = v[i]
+        for j in range(N_WORK):
+            W[b, j] = Wb[j]
+        contact0[b] = contact
+        t_total = n_samples * dt
+        theta0[b] = (th0 + om * t_total) % (2.0 * math.pi)
+        g0[b] = gg + gr * t_total
+        tau0[b] = tau0[b] + t_total

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..forces import _layout as L
 from ..system import System
-from ._kernel import integrate_segment, integrate_segment_serial
+from ._kernel import integrate_segment
 from .base import AbstractIntegrator
 from .state import State
 
@@ -62,8 +62,7 @@ class RK4(AbstractIntegrator):
 
     def _advance(self, state: State, arrays, omega, gap_rate, dt, n_samples, substeps, out,
                  record_velocity) -> None:
-        kernel = integrate_segment if state.batch > 1 else integrate_segment_serial
-        kernel(
+        integrate_segment(
             state.q, state.v, state.contact, state.tau, state.theta, omega, arrays["dc"],
             arrays["ds"], arrays["ybase"], state.gap, gap_rate, arrays["K"], arrays["Dair"],
             arrays["Dcon"], arrays["S"], arrays["fp"], state.work, dt, n_samples, substeps,
