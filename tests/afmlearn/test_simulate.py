@@ -223,7 +223,7 @@ def test_sweet_spot_experiment(tmp_path, compose_cfg):
     np.testing.assert_allclose(cl.stiffness, [1.0, 36.0])
     np.testing.assert_allclose(cl.force_gain, [1.0, 13.5 / 10.5])
     np.testing.assert_allclose(cl.contact_damping, [5.7e-3, 8e-3])
-    assert obj["force"] == DMT(a0=0.2, vdw=1e-3, stiffness=10.5)
+    assert obj["force"] == DMT(a0=0.2, vdw=6e-4, stiffness=10.5)  # C1 of docs/sweet_spot.md
     trace = read_trace(metrics["output"])
     assert trace.excitation == "base"
     assert trace.dither_amplitude_m == pytest.approx(2.649109e-3 * 100e-9)
