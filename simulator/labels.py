@@ -7,8 +7,9 @@ Definitions (used everywhere in afmlearn):
 * ``contact_fraction``: share of time spent in the contact regime.
 * ``coupling_strength``: share of the tip motion carried by modes >= 2,
   ``var(sum_{i>=2} q_i) / (var(q_1) + var(sum_{i>=2} q_i))`` in [0, 1].
-* ``regime``: ``free`` (no force), ``attractive`` (force but never in contact),
-  ``repulsive`` (intermittent contact, tapping) or ``permanent_contact``.
+* ``regime``: ``free`` (no force), ``attractive`` (force, never repulsive, never in contact),
+  ``repulsive`` (intermittent contact, tapping; for laws without a contact branch such as
+  Lennard-Jones: the force turns repulsive on part of the orbit) or ``permanent_contact``.
 * ``amplitude``, ``phase``: first-harmonic amplitude and phase lag of the deflection relative
   to the drive phase (lock-in over the recorded span).
 """
@@ -85,7 +86,7 @@ def trace_labels(*, q: NDArray[np.float64], force: NDArray[np.float64],
     fmax = float(np.max(np.abs(force)))
     if fmax == 0.0:
         regime = "free"
-    elif cf <= 0.0:
+    elif cf <= 0.0 and float(np.max(force)) <= 0.0:
         regime = "attractive"
     elif cf >= 1.0 - 1e-9:
         regime = "permanent_contact"
