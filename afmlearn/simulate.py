@@ -107,7 +107,9 @@ def simulate(cfg: DictConfig) -> tuple[dict[str, Any], dict[str, Any]]:
         ``peak_force_n`` [N] (largest repulsive force), ``coupling_strength`` [-] (max over
         rows), ``regime`` (most common), ``n_points``, ``n_samples``, ``scenario``,
         ``model``, ``seed``, ``runtime_s`` [s], ``output`` (path of the file written) and, for
-        shards, ``manifest``.
+        shards, ``manifest``. A shard whose file already exists (an earlier, interrupted run
+        of the same dataset) is skipped unless ``shard.overwrite`` is true; its metrics are
+        then only ``output``, ``skipped=True``, ``manifest``, ``seed``, ``runtime_s``.
     objects : dict
         ``cfg`` (the effective config: shard seed and drawn parameters applied),
         ``scales``, ``cantilever``, ``force``, ``excitation``, ``scenario``, ``sensor``,
@@ -124,6 +126,14 @@ def simulate(cfg: DictConfig) -> tuple[dict[str, Any], dict[str, Any]]:
     cfg = _checked_root(cfg)
     cfg, drawn = _apply_shard(cfg)
     path, folder = _output_path(cfg)
+    if folder is not None and path.exists() and not cfg.shard.overwrite:
+        # resume an interrupted dataset: shard files are written atomically, so an existing
+        # one is complete
+        manifest = _update_manifest(folder)
+        log.info("shard %s exists, skipped (shard.overwrite=true to redo it)", path)
+        metrics = {"output": str(path), "skipped": True, "manifest": str(manifest),
+                   "seed": int(cfg.seed), "runtime_s": time.perf_counter() - t0}
+        return metrics, {"cfg": cfg, "path": path, "manifest": manifest, "drawn": drawn}
     obj = build(cfg)
     system, scenario, scales = obj["system"], obj["scenario"], obj["scales"]
 
@@ -245,7 +255,8 @@ def _checked_root(cfg: DictConfig) -> DictConfig:
     if not _is_real(periods) or not float(periods) > 0:
         raise _range_error("free_trace_periods", "a number > 0", periods)
     with _open_struct(cfg):
-        cfg.shard = {"index": int(index), "count": int(count)}
+        cfg.shard = {"index": int(index), "count": int(count),
+                     "overwrite": bool(OmegaConf.select(cfg, "shard.overwrite", default=False))}
         cfg.free_trace_periods = float(periods)
         for key, default in (("progress", True), ("free_trace", True), ("labels", True),
                              ("description", None)):

@@ -279,6 +279,20 @@ def test_shards_write_a_manifest(tmp_path, run_sim, tiny):
     assert again["drawn"]["excitation.free_amplitude_ratio"] == drawn[1]
 
 
+def test_rerun_skips_finished_shards(tmp_path, run_sim, tiny):
+    """An interrupted dataset is resumed: existing (atomically written) shards are kept."""
+    folder = tmp_path / "ds"
+    args = (*tiny["steady"], f"output={folder}", "shard.count=2", "shard.index=0")
+    first, _ = run_sim(*args)
+    mtime = Path(first["output"]).stat().st_mtime_ns
+    again, _ = run_sim(*args)
+    assert again["skipped"] is True
+    assert Path(again["output"]).stat().st_mtime_ns == mtime
+    redo, _ = run_sim(*args, "shard.overwrite=true")
+    assert "skipped" not in redo
+    assert Path(redo["output"]).stat().st_mtime_ns != mtime
+
+
 @pytest.mark.parametrize(
     ("overrides", "match"),
     [
