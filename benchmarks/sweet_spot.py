@@ -471,7 +471,9 @@ def main(argv: list[str] | None = None) -> None:
          + f", reverse {rv['dphi'][k_br]:.0f} deg" + ("" if rv["locked"][k_br] else
                                                        " (not locked)")
          + f" at Omega = {fw['omega'][k_b]:.4f}", "-"],
-        ["minimum gap / indentation", "(not reported)",
+        ["minimum gap / indentation",
+         "reduced in the sweet spot (deflection minima curve up, 165-166 kHz; ch. 3 Fig. 3.2a "
+         "inset, App. 3.C), no number",
          f"forward at Omega~1: z_min = {fw['min_gap'][i1]:.3f} (indentation "
          f"{fw['indentation'][i1]:.3f}); max indentation in the model window "
          f"{s.get('win_indent', float('nan')):.3f}; smallest z_min "
