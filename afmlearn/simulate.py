@@ -62,6 +62,7 @@ from simulator.forces import (
     NoInteraction,
     SphereVdW,
 )
+from simulator.labels import labels_to_si as si_labels
 from simulator.scenarios import AbstractScenario
 
 __all__ = ["simulate", "build", "si_labels", "REGIME_CODES", "EV"]
@@ -74,16 +75,6 @@ EV = 1.602176634e-19
 REGIME_CODES: dict[str, int] = {"free": 0, "attractive": 1, "repulsive": 2,
                                 "permanent_contact": 3}
 #: dimensionless label -> (SI name, unit attribute of Scales or None)
-_SI_LABELS: dict[str, tuple[str, str | None]] = {
-    "dissipated_energy": ("dissipated_energy_j", "energy"),
-    "drive_energy": ("drive_energy_j", "energy"),
-    "amplitude": ("amplitude_m", "length"),
-    "mean_deflection": ("mean_deflection_m", "length"),
-    "min_gap": ("min_gap_m", "length"),
-    "max_force": ("max_force_n", "force"),
-    "min_force": ("min_force_n", "force"),
-    "phase": ("phase_rad", None),
-}
 #: config groups searched for a bare key of ``dataset.ranges``
 _GROUPS = ("excitation", "scenario", "force", "cantilever", "sensor")
 
@@ -558,18 +549,6 @@ def _jsonable(tree: Any) -> Any:
     if tree is None or isinstance(tree, bool | int | float | str):
         return tree
     return repr(tree)
-
-
-def si_labels(labels: Mapping[str, Any], scales: Scales) -> dict[str, Any]:
-    """Per-trace labels of :mod:`simulator.labels` in SI units (names as ``to_si``)."""
-    out: dict[str, Any] = {}
-    for key, value in labels.items():
-        name, unit = _SI_LABELS.get(key, (key, None))
-        if isinstance(value, str):
-            out[name] = value
-        else:
-            out[name] = float(value) * (getattr(scales, unit) if unit else 1.0)
-    return out
 
 
 def _measured(obj: dict[str, Any], x: np.ndarray, dt: float) -> np.ndarray:

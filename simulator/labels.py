@@ -22,9 +22,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ._scales import Scales
 from .integrate.state import Segment
 
-__all__ = ["segment_labels", "trace_labels", "coupling_strength", "lock_in"]
+__all__ = ["segment_labels", "trace_labels", "labels_to_si", "coupling_strength", "lock_in"]
 
 
 def lock_in(x: NDArray[np.float64], phase: NDArray[np.float64], harmonic: int = 1) -> complex:
@@ -113,3 +114,33 @@ def trace_labels(*, q: NDArray[np.float64], force: NDArray[np.float64],
         "max_force": float(np.max(force)),
         "min_force": float(np.min(force)),
     }
+
+
+#: dimensionless label -> (SI name, ``Scales`` attribute giving its unit, or None)
+SI_LABELS: dict[str, tuple[str, str | None]] = {
+    "dissipated_energy": ("dissipated_energy_j", "energy"),
+    "drive_energy": ("drive_energy_j", "energy"),
+    "amplitude": ("amplitude_m", "length"),
+    "mean_deflection": ("mean_deflection_m", "length"),
+    "min_gap": ("min_gap_m", "length"),
+    "max_force": ("max_force_n", "force"),
+    "min_force": ("min_force_n", "force"),
+    "phase": ("phase_rad", None),
+}
+
+
+def labels_to_si(labels: dict[str, Any], scales: Scales) -> dict[str, Any]:
+    """Labels of :func:`trace_labels` (scalars, or arrays / lists per sweep row) in SI units.
+
+    Dimensioned labels are renamed with their unit suffix (``amplitude`` -> ``amplitude_m``);
+    dimensionless numbers and strings pass through unchanged. Scalars stay Python floats.
+    """
+    out: dict[str, Any] = {}
+    for key, value in labels.items():
+        name, unit = SI_LABELS.get(key, (key, None))
+        if isinstance(value, str | list):
+            out[name] = value
+            continue
+        v = np.asarray(value, dtype=float) * (getattr(scales, unit) if unit else 1.0)
+        out[name] = float(v) if v.ndim == 0 else v
+    return out

@@ -38,10 +38,14 @@ def sync_contact(system: System, state: State) -> None:
     state.contact[:] = new.astype(np.int8)
 
 
-def settle(system: System, state: State, *, integrator: AbstractIntegrator, omega: float,
-           dt: float, periods: float, progress=None) -> State:
-    """Integrate ``periods`` drive periods without recording; return the end state."""
-    n = int(math.ceil(periods * 2.0 * math.pi / (omega * dt)))
+def settle(system: System, state: State, *, integrator: AbstractIntegrator,
+           omega: float | np.ndarray, dt: float, periods: float, progress=None) -> State:
+    """Integrate ``periods`` drive periods without recording; return the end state.
+
+    ``omega`` may hold one frequency per trajectory (shape (B,)); the periods are then counted
+    at the lowest one.
+    """
+    n = int(math.ceil(periods * 2.0 * math.pi / (float(np.min(omega)) * dt)))
     while n > 0:
         m = min(n, _CHUNK)
         state = integrator.run(system, state, omega=omega, n_samples=m, dt=dt).end

@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._scales import Scales
+from ..labels import labels_to_si
 from ..system import System
 
 __all__ = ["SimulationResult"]
@@ -88,18 +89,6 @@ class SimulationResult:
         modal = np.moveaxis(self.q, -2, 0) * ell
         rg = self.rest_gap if not self.is_sweep else self.rest_gap[0]
         gap: float | NDArray = (float(rg[0]) * ell if np.ptp(rg) == 0.0 else rg * ell)
-        lab = dict(self.labels)
-        si_labels = {
-            "dissipated_energy_j": np.asarray(lab.pop("dissipated_energy")) * scales.energy,
-            "drive_energy_j": np.asarray(lab.pop("drive_energy")) * scales.energy,
-            "amplitude_m": np.asarray(lab.pop("amplitude")) * ell,
-            "mean_deflection_m": np.asarray(lab.pop("mean_deflection")) * ell,
-            "min_gap_m": np.asarray(lab.pop("min_gap")) * ell,
-            "max_force_n": np.asarray(lab.pop("max_force")) * scales.force,
-            "min_force_n": np.asarray(lab.pop("min_force")) * scales.force,
-            "phase_rad": np.asarray(lab.pop("phase")),
-        }
-        si_labels.update(lab)
         return {
             "deflection_m": self.deflection * ell,
             "force_n": self.force * scales.force,
@@ -107,5 +96,5 @@ class SimulationResult:
             "gap_m": gap,
             "sample_rate_hz": f0 * 2.0 * np.pi / self.dt,
             "drive_frequency_hz": np.asarray(self.omega) * f0,
-            "labels": si_labels,
+            "labels": labels_to_si(self.labels, scales),
         }

@@ -14,7 +14,7 @@ from ..forces.base import check_range
 from ..integrate.state import Segment, State
 from ..labels import segment_labels
 from ..system import System
-from .base import AbstractScenario
+from .base import AbstractScenario, settle
 from .result import SimulationResult
 
 __all__ = ["Sweep", "SweepPoint", "stack_labels"]
@@ -157,8 +157,8 @@ class Sweep(AbstractScenario):
         state = State.free_orbit(system, omega=schedule[:, 0], gap=self.gap)
         sp = self.settle_periods_for(system)
         # settle each direction at its first frequency (batch members may differ)
-        n_set = int(math.ceil(sp * 2.0 * math.pi / (float(schedule[:, 0].min()) * self.dt)))
-        state = _settle_batch(system, state, self, schedule[:, 0], n_set, progress)
+        state = settle(system, state, integrator=self.integrator, omega=schedule[:, 0],
+                       dt=self.dt, periods=sp, progress=progress)
         for k in range(self.n_points):
             om = schedule[:, k]
             if self.settle_samples:
@@ -208,16 +208,3 @@ def stack_labels(labels: Sequence[dict[str, Any]]) -> dict[str, Any]:
         vals = [lab[key] for lab in labels]
         out[key] = vals if isinstance(vals[0], str) else np.asarray(vals, dtype=float)
     return out
-
-
-def _settle_batch(system: System, state: State, sweep: Sweep, omega: NDArray, n: int,
-                  progress) -> State:
-    chunk = 200_000
-    while n > 0:
-        m = min(n, chunk)
-        state = sweep.integrator.run(system, state, omega=omega, n_samples=m, dt=sweep.dt).end
-        n -= m
-        if progress is not None:
-            progress(m)
-    return state
-
