@@ -5,7 +5,11 @@ afmlearn.simulate.simulate for each run:
 
 * steady tapping traces (TAP300AL-G, 10 nm gap, 15 nm free amplitude) for three force models:
   conservative DMT, viscoelastic DMT and hysteretic JKR;
-* a small forward/reverse frequency sweep (41 points, 0.99--1.01 f0) with DMT.
+* a small forward/reverse frequency sweep (41 points, 0.99--1.01 f0) with DMT;
+* force identification (afmlearn.identify) on a longer DMT recording (400 periods, 500 samples
+  per period, 1 % noise): the identified equation, the force accuracy against the simulator's
+  truth (which the identifier never sees) and the files of `scripts/identify.py`;
+* the QRNN mode-coupling score of the sweep with the shipped checkpoint.
 
 Files go to outputs/demo/ (trace files) and outputs/demo/figures/ (PNG). The first run
 compiles the simulator's kernels (a few minutes); later runs take seconds.
@@ -19,8 +23,12 @@ import argparse
 import time
 from pathlib import Path
 
+import numpy as np
 from hydra import compose, initialize_config_dir
 
+from afmlearn.identify.infer import identify_trace
+from afmlearn.io import read_trace
+from afmlearn.metrics import force_accuracy
 from afmlearn.plots import plot_sweep, plot_trace
 from afmlearn.simulate import simulate
 
@@ -32,6 +40,9 @@ RUNS = [
     ("tapping_jkr_hysteretic", ["force=jkr_hysteretic"]),
     ("sweep_dmt", ["force=dmt", "scenario=sweep"]),
 ]
+#: the recording the demo identifies: long enough for the contact's harmonics to stand out
+IDENTIFY = ("identify_dmt", ["force=dmt", "scenario.n_periods=400",
+                             "scenario.samples_per_period=500", "scenario.settle_periods=3500"])
 
 def _fixed(value: float, digits: int = 2) -> str:
     """``value`` with ``digits`` decimals, without a negative zero ("-0.00")."""
@@ -79,6 +90,11 @@ def main() -> None:
             print(f"simulating {name} ...", flush=True)
             metrics, _ = simulate(cfg)
             results.append((name, metrics))
+        name, overrides = IDENTIFY
+        cfg = compose("simulate", overrides=[*overrides, f"output={out / name}.h5",
+                                             "progress=false"])
+        print(f"simulating {name} ...", flush=True)
+        id_metrics, _ = simulate(cfg)
     print()
     print("Summary (amplitude: first harmonic; sweep: max amplitude, mean contact fraction and"
           " dissipation over rows)")
@@ -96,7 +112,45 @@ def main() -> None:
     print(f"Figures ({len(paths)}):")
     for p in paths:
         print(f"  {p}")
+    _identify(id_metrics["output"], out / "identify")
+    _coupling(next(m["output"] for n, m in results if m["scenario"] == "sweep"))
     print(f"Done in {time.perf_counter() - t0:.1f} s.")
+
+
+def _identify(path: str, out_dir: Path) -> None:
+    """Identify the force of one simulated recording and compare with the truth."""
+    print()
+    print(f"Identifying the tip-sample force of {path} (labels are not read) ...", flush=True)
+    t = time.perf_counter()
+    res = identify_trace(path, out_dir)
+    ide = res["identifier"]
+    m = ide.model_
+    print(f"  identified in {time.perf_counter() - t:.1f} s")
+    print(f"  equation (dimensionless): {m.equation()}")
+    print(f"  force (SI): {m.equation_si()}")
+    s = ide.summary_
+    exp = s["interaction_exponent"]
+    print(f"  peak repulsive force {s['peak_repulsive_force_n'] * 1e9:.2f} nN, contact time "
+          f"{s['contact_time_s'] * 1e9:.0f} ns, interaction exponent "
+          f"{'n/a' if exp is None else f'{exp:.2f}'}, held-out state accuracy "
+          f"{s['state_accuracy_heldout']:.3f}")
+    truth = read_trace(path, labels=True)  # the demo may compare with the truth
+    k, ell = truth.spring_constant_n_per_m, float(np.mean(truth.gap_m))
+    f_true = truth.labels.force_n / (k * ell)
+    z_true = np.asarray(truth.gap_m) / ell - truth.labels.modal_m[0] / ell
+    a0 = truth.labels.model["force"]["parameters"]["a0"]
+    acc = force_accuracy(ide.force_, f_true, z_true, a0)
+    print("  force accuracy vs the simulator's truth (1 - NRMSE): "
+          + ", ".join(f"{k} {v['accuracy']:.3f}" for k, v in acc.items()))
+    print(f"  results: {out_dir} (result.json, model.json, force.h5, figures)")
+
+
+def _coupling(path: str) -> None:
+    """QRNN coupling score of the simulated sweep with the shipped checkpoint."""
+    from afmlearn.qrnn.infer import coupling_summary
+
+    print()
+    print(coupling_summary(path))
 
 
 if __name__ == "__main__":

@@ -1,0 +1,1 @@
+"""Sparse-regression identification of the tip-sample force from deflection traces."""

@@ -1,0 +1,191 @@
+"""Figures of the QRNN: predicted vs measured orbit, coupling score vs frequency, hidden units.
+
+`plot_prediction`
+    Deflection vs time (input period, then measured and predicted periods) and the phase-space
+    orbit (deflection vs its rate of change) of the predicted periods.
+`plot_scores`
+    Coupling and sweet-spot scores per trace vs drive frequency, the threshold and the
+    sweet-spot interval(s).
+`plot_unit_activation`
+    Mean hidden-unit activation vs drive frequency across a sweep: the modal shares on top, the
+    units most correlated with each target below (``afmlearn.qrnn.interpret``).
+
+Figures are drawn on an explicit Agg canvas (the caller's pyplot backend is untouched) and
+written atomically as PNG (temporary sibling, then ``os.replace``).
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from numpy.typing import ArrayLike, NDArray
+from scipy.signal import savgol_filter
+
+__all__ = ["plot_prediction", "plot_scores", "plot_unit_activation"]
+
+_MEASURED, _PREDICTED, _SWEET = "#1f77b4", "#d62728", "#2ca02c"
+
+
+def _save(fig: Figure, path: str | os.PathLike[str]) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    FigureCanvasAgg(fig)
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+    try:
+        fig.savefig(tmp, format="png", dpi=110)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _rate(x: NDArray[np.float64], samples_per_period: int) -> NDArray[np.float64]:
+    """d x / d(drive phase) by a Savitzky--Golay derivative (cubic, ~1/8 period window)."""
+    w = max(5, (samples_per_period // 8) | 1)
+    if x.size < w:
+        return np.gradient(x) * samples_per_period / (2 * np.pi)
+    return savgol_filter(x, w, 3, deriv=1) * samples_per_period / (2 * np.pi)
+
+
+def plot_prediction(measured: ArrayLike, predicted: ArrayLike, path: str | os.PathLike[str], *,
+                    samples_per_period: int, title: str = "",
+                    unit: str = "input-normalised") -> Path:
+    """Measured vs predicted deflection and orbit of one window.
+
+    Parameters
+    ----------
+    measured : array-like, shape ((1 + horizon) * P,)
+        Input period followed by the measured target periods.
+    predicted : array-like, shape (horizon * P,)
+        Predicted target periods.
+    path : path-like
+        PNG file to write.
+    samples_per_period : int
+        ``P``.
+    title : str
+    unit : str
+        Unit of the deflection axis label.
+    """
+    m = np.asarray(measured, dtype=float).ravel()
+    p = np.asarray(predicted, dtype=float).ravel()
+    n_in = m.size - p.size
+    if n_in <= 0 or samples_per_period < 2:
+        raise ValueError("measured must be longer than predicted (input period + targets) and "
+                         "samples_per_period >= 2")
+    t = np.arange(m.size) / samples_per_period
+    fig = Figure(figsize=(11, 4.2), layout="constrained")
+    ax, ax2 = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.8, 1]})
+    ax.axvspan(0, n_in / samples_per_period, color="0.9", label="input period")
+    ax.plot(t, m, color=_MEASURED, lw=1.2, label="measured")
+    ax.plot(t[n_in:], p, color=_PREDICTED, lw=1.2, ls="--", label="predicted")
+    ax.set_xlabel("time [drive periods]")
+    ax.set_ylabel(f"deflection [{unit}]")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(title or "orbit prediction from one period")
+    # orbit: deflection vs d(deflection)/d(phase), per radian of the drive (smoothed derivative)
+    ax2.plot(m[n_in:], _rate(m[n_in:], samples_per_period), color=_MEASURED, lw=1.0,
+             label="measured")
+    ax2.plot(p, _rate(p, samples_per_period), color=_PREDICTED, lw=1.0, ls="--",
+             label="predicted")
+    ax2.set_xlabel("deflection")
+    ax2.set_ylabel("d deflection / d(drive phase) [per rad]")
+    ax2.set_title("phase-space orbit (predicted periods)")
+    ax2.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def plot_scores(frequency: ArrayLike, coupled: ArrayLike, path: str | os.PathLike[str], *,
+                sweet: ArrayLike | None = None, threshold: float = 0.5,
+                intervals: Sequence[tuple[float, float] | None] = (),
+                labels: Sequence[str] | None = None, unit: str = "kHz",
+                scale: float = 1e-3, title: str = "") -> Path:
+    """Coupling (and sweet-spot) score per trace vs drive frequency.
+
+    Parameters
+    ----------
+    frequency : array-like, shape (n,)
+        Drive frequency of each trace [Hz] (multiplied by ``scale`` for the axis).
+    coupled : array-like, shape (n,)
+        Coupling score in [0, 1].
+    path : path-like
+    sweet : array-like, shape (n,), optional
+        Sweet-spot score in [0, 1].
+    threshold : float
+        Flag threshold, drawn as a line.
+    intervals : sequence of (low, high) or None
+        Sweet-spot intervals [Hz] to shade.
+    labels : sequence of str, optional
+        Legend label of each interval (e.g. "forward").
+    unit, scale : str, float
+        Axis unit and the factor from Hz to it.
+    """
+    f = np.asarray(frequency, dtype=float).ravel() * scale
+    c = np.asarray(coupled, dtype=float).ravel()
+    fig = Figure(figsize=(8, 4), layout="constrained")
+    ax = fig.subplots()
+    ax.plot(f, c, "o-", ms=3, lw=1, color=_PREDICTED, label="coupling score")
+    if sweet is not None:
+        ax.plot(f, np.asarray(sweet, dtype=float).ravel(), "s-", ms=2.5, lw=0.8, color=_SWEET,
+                label="sweet-spot score")
+    ax.axhline(threshold, color="0.4", ls=":", lw=1, label=f"threshold {threshold:g}")
+    for i, iv in enumerate(intervals):
+        if iv is None:
+            continue
+        name = labels[i] if labels is not None and i < len(labels) else ""
+        ax.axvspan(iv[0] * scale, iv[1] * scale, color=_SWEET, alpha=0.12 + 0.06 * i,
+                   label=f"sweet spot {name}".strip())
+    ax.set_ylim(-0.03, 1.03)
+    ax.set_xlabel(f"drive frequency [{unit}]")
+    ax.set_ylabel("score")
+    ax.set_title(title or "mode-coupling score vs drive frequency")
+    ax.legend(fontsize=8, loc="best")
+    return _save(fig, path)
+
+
+def plot_unit_activation(interp: Any, path: str | os.PathLike[str], *, title: str = "",
+                         max_targets: int = 4) -> Path:
+    """Hidden-unit activation vs drive frequency (:class:`SweepInterpretation`).
+
+    Top panel: the targets (mode shares, sweet-spot membership) vs ``Omega``. One panel per
+    target below: the activation of its top-ranked units (with r in the legend) over the faint
+    activations of all units, each unit min-max scaled across the sweep. With exactly two
+    modes the mode-1 share is ``1 -`` the mode-2 share, so its panel is left out.
+    """
+    w = np.asarray(interp.omega, dtype=float)
+    act = np.asarray(interp.activation, dtype=float)
+    span = np.ptp(act, axis=0)
+    scaled = (act - act.min(axis=0)) / np.where(span > 0, span, 1.0)
+    names = set(interp.targets)
+    two_modes = "mode 2 share" in names and "mode 3 share" not in names
+    rankings = [r for r in interp.rankings
+                if not (two_modes and r.target == "mode 1 share")][:max_targets]
+    fig = Figure(figsize=(8, 2.2 * (1 + len(rankings))), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1 + len(rankings), 1, sharex=True))
+    top = axes[0]
+    for name, values in interp.targets.items():
+        if name.startswith("mode"):
+            top.plot(w, values, lw=1.2, label=name)
+    top.set_ylabel("share of tip motion")
+    top.legend(fontsize=8)
+    top.set_title(title or "hidden units vs drive frequency")
+    for ax, ranking in zip(axes[1:], rankings, strict=True):
+        ax.plot(w, scaled, color="0.85", lw=0.5)
+        for u, r in zip(ranking.units, ranking.r, strict=True):
+            ax.plot(w, scaled[:, u], lw=1.4, label=f"unit {u} (r = {r:+.2f})")
+        ax.set_ylabel("activation\n(scaled)")
+        ax.set_title(f"units most correlated with {ranking.target}", fontsize=9)
+        ax.legend(fontsize=7, loc="best")
+    if interp.sweet is not None and np.any(interp.sweet):
+        lo, hi = w[interp.sweet].min(), w[interp.sweet].max()
+        for ax in axes:
+            ax.axvspan(lo, hi, color=_SWEET, alpha=0.12)
+    axes[-1].set_xlabel(r"drive frequency $\Omega = f / f_0$")
+    return _save(fig, path)

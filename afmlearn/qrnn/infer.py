@@ -1,0 +1,280 @@
+"""Mode-coupling flag, sweet spot and orbit forecast on a recorded trace (format v1).
+
+:func:`infer` is the function behind ``scripts/infer_qrnn.py trace=PATH out_dir=DIR``. It reads
+the file with :func:`afmlearn.io.read_trace` (``labels=False``: the ``/labels`` group of a
+simulated file is never opened), cuts it into windows exactly like the training data
+(:func:`afmlearn.qrnn.data.windows_from_trace`: one drive period in, ``horizon`` periods to
+predict, normalised by the input period) and runs the trained
+:class:`~afmlearn.qrnn.module.OrbitModule`. It writes, atomically:
+
+``coupling.json``
+    ``score`` (mean window coupling score) and ``flag`` (``score >= threshold``) for every trace
+    (sweep row), with its drive frequency, sweet-spot score and the NRMSE of the orbit forecast
+    against the measured following periods; for sweeps, the sweet-spot interval of each sweep
+    direction in Hz (or null); the checkpoint used; the model's settings.
+figures (``figures=True``)
+    ``prediction.png`` (predicted vs measured deflection and orbit of one window: the trace, or
+    the sweep row with the highest coupling score) and, for sweeps, ``scores.png`` (coupling and
+    sweet-spot score vs drive frequency with the interval shaded).
+
+Bad input raises ``ValueError`` (files breaking the format: ``TraceFormatError``, a
+``ValueError``) with a message naming the problem: fewer than 20 samples per drive period, a row
+shorter than one input period plus the horizon, NaN / inf samples, a missing file.
+
+The shipped checkpoint :data:`DEFAULT_CHECKPOINT` is used unless ``checkpoint`` is given; any
+checkpoint written by :func:`afmlearn.qrnn.train.train` (``last.ckpt``, the best one, or an
+``export``) works.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import uuid
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from hydra.utils import instantiate
+
+from afmlearn.io import Trace, read_trace
+from afmlearn.qrnn.coupling import directions, sweet_spot_interval, trace_scores
+from afmlearn.qrnn.data import windows_from_trace
+from afmlearn.qrnn.evaluate import nrmse_per_period
+from afmlearn.qrnn.module import CHECKPOINT_KEY, OrbitModule
+
+__all__ = ["DEFAULT_CHECKPOINT", "load_module", "predict_trace", "infer", "coupling_summary"]
+
+#: checkpoint shipped with the package (trained by ``experiment=qrnn_default``)
+DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "qrnn_default.ckpt"
+
+#: module arguments of the model config that inference does not need
+_NOT_FOR_INFERENCE = ("name", "net", "optimizer", "scheduler")
+
+
+def load_module(checkpoint: str | os.PathLike[str] | None = None
+                ) -> tuple[OrbitModule, dict[str, Any], Path]:
+    """Rebuild the trained module of a checkpoint (evaluation mode, CPU).
+
+    Parameters
+    ----------
+    checkpoint : path, optional
+        A checkpoint of :func:`afmlearn.qrnn.train.train`; default :data:`DEFAULT_CHECKPOINT`.
+
+    Returns
+    -------
+    module : OrbitModule
+    run : dict
+        ``config`` (resolved training configuration), ``input_size``, ``samples_per_period``,
+        ``horizon`` (and ``metrics`` for exported checkpoints).
+    path : Path
+        The checkpoint file used.
+    """
+    path = Path(checkpoint) if checkpoint is not None else DEFAULT_CHECKPOINT
+    if not path.is_file():
+        hint = (" (the shipped checkpoint is missing: train one with `python scripts/"
+                "train_qrnn.py experiment=qrnn_default` or pass checkpoint=PATH)"
+                if checkpoint is None else "")
+        raise ValueError(f"checkpoint: no such file {str(path)!r}{hint}")
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as err:  # noqa: BLE001 - any unpickling failure means "not ours"
+        raise ValueError(f"checkpoint: {str(path)!r} is not a readable torch checkpoint "
+                         f"({type(err).__name__}: {err})") from err
+    meta = ckpt.get(CHECKPOINT_KEY) if isinstance(ckpt, dict) else None
+    if not meta or not meta.get("run") or "state_dict" not in ckpt:
+        raise ValueError(f"checkpoint: {str(path)!r} holds no afmlearn QRNN model (written by "
+                         "afmlearn.qrnn.train.train?)")
+    run = dict(meta["run"])
+    if "metrics" in meta:
+        run["metrics"] = meta["metrics"]
+    model_cfg = run["config"]["model"]
+    net = instantiate(model_cfg["net"], input_size=int(run["input_size"]))
+    module = instantiate({k: v for k, v in model_cfg.items() if k not in _NOT_FOR_INFERENCE},
+                         net=net)
+    module.load_state_dict(ckpt["state_dict"])
+    module.run_config = meta["run"]
+    module.eval()
+    return module, run, path
+
+
+def _direction_name(omega: np.ndarray) -> str:
+    if omega.size < 2 or omega[-1] == omega[0]:
+        return "single"
+    return "forward" if omega[-1] > omega[0] else "reverse"
+
+
+def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
+                  run: dict[str, Any], *, threshold: float = 0.5) -> dict[str, Any]:
+    """Scores, flags, sweet-spot intervals and forecasts of one trace or sweep (no files).
+
+    Parameters
+    ----------
+    trace : Trace or path
+        A recording (read without labels when a path).
+    module, run : OrbitModule, dict
+        From :func:`load_module`.
+    threshold : float
+        Flag threshold in (0, 1).
+
+    Returns
+    -------
+    dict
+        ``summary`` (JSON-ready, the body of ``coupling.json``) and ``arrays``
+        (``windows`` of :func:`windows_from_trace`, ``pred`` (N, horizon P) normalised forecast,
+        ``coupled``, ``sweet`` (N,) window scores).
+    """
+    if not 0.0 < float(threshold) < 1.0:
+        raise ValueError(f"threshold must be in (0, 1), got {threshold!r}")
+    if not isinstance(trace, Trace):
+        trace = read_trace(trace)          # labels=False: /labels is never opened
+    p, horizon = int(run["samples_per_period"]), int(run["horizon"])
+    win = windows_from_trace(trace, samples_per_period=p, horizon=horizon)
+    out = module.predict_windows(torch.from_numpy(np.ascontiguousarray(win["x"])))
+    pred = out["y"].numpy().astype(float)
+    coupled, sweet = out["coupled"].numpy(), out["sweet"].numpy()
+    rows, score = trace_scores(coupled, win["row"])
+    _, sweet_score = trace_scores(sweet, win["row"])
+    err = nrmse_per_period(pred, win["y"].astype(float), horizon=horizon)
+    f0 = trace.resonance_frequency_hz
+    f_rows = np.asarray(win["omega_rows"], dtype=float) * f0
+    traces = []
+    for i, r in enumerate(rows):
+        sel = win["row"] == r
+        traces.append({
+            "row": int(r), "drive_frequency_hz": float(f_rows[r]),
+            "omega": float(win["omega_rows"][r]), "score": float(score[i]),
+            "flag": bool(score[i] >= threshold), "sweet_score": float(sweet_score[i]),
+            "n_windows": int(sel.sum()),
+            "forecast_nrmse_per_period": [float(v) for v in err[sel].mean(axis=0)],
+        })
+    summary: dict[str, Any] = {
+        "is_sweep": bool(trace.is_sweep), "n_traces": len(traces), "threshold": float(threshold),
+        "traces": traces,
+    }
+    if trace.is_sweep:
+        summary["flagged_fraction"] = float(np.mean([t["flag"] for t in traces]))
+        spots = []
+        for part in directions(f_rows[rows]):
+            f, s = f_rows[rows][part], sweet_score[part]
+            iv = sweet_spot_interval(f, s, threshold=threshold)
+            spots.append({"direction": _direction_name(f), "rows": [int(rows[part][0]),
+                                                                    int(rows[part][-1])],
+                          "interval_hz": None if iv is None else [iv[0], iv[1]]})
+        summary["sweet_spot"] = spots
+    else:
+        summary["score"] = traces[0]["score"]
+        summary["flag"] = traces[0]["flag"]
+        summary["sweet_spot"] = None
+    return {"summary": summary,
+            "arrays": {"windows": win, "pred": pred, "coupled": coupled, "sweet": sweet,
+                       "rows": rows, "score": score, "sweet_score": sweet_score,
+                       "frequency_hz": f_rows[rows]}}
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+    try:
+        tmp.write_text(json.dumps(data, indent=2) + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _figures(result: dict[str, Any], out: Path, run: dict[str, Any]) -> list[str]:
+    from afmlearn.plots.qrnn import plot_prediction, plot_scores
+
+    a = result["arrays"]
+    win = a["windows"]
+    p = int(run["samples_per_period"])
+    best_row = int(a["rows"][int(np.argmax(a["score"]))])
+    i = int(np.flatnonzero(win["row"] == best_row)[0])
+    u_in = win["x"][i, :, 0].astype(float)
+    measured = np.concatenate([u_in, win["y"][i].astype(float)])
+    off, sc = float(win["offset_m"][i]), float(win["scale_m"][i])
+    f = win["omega_rows"][best_row]
+    title = (f"row {best_row}, " if win["is_sweep"] else "") + f"Omega = {f:.4f}"
+    paths = [plot_prediction((off + sc * measured) * 1e9, (off + sc * a["pred"][i]) * 1e9,
+                             out / "prediction.png", samples_per_period=p, unit="nm",
+                             title=f"orbit prediction ({title})")]
+    s = result["summary"]
+    if s["is_sweep"]:
+        ivs = [tuple(x["interval_hz"]) if x["interval_hz"] else None for x in s["sweet_spot"]]
+        paths.append(plot_scores(a["frequency_hz"], a["score"], out / "scores.png",
+                                 sweet=a["sweet_score"], threshold=s["threshold"],
+                                 intervals=ivs, labels=[x["direction"] for x in s["sweet_spot"]]))
+    return [str(q) for q in paths]
+
+
+def infer(trace_path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
+          checkpoint: str | os.PathLike[str] | None = None, threshold: float = 0.5,
+          figures: bool = True) -> dict[str, Any]:
+    """Run the model on a trace file and write ``coupling.json`` (+ figures) into ``out_dir``.
+
+    Parameters
+    ----------
+    trace_path : path
+        Trace-format-v1 file (one trace or a sweep).
+    out_dir : path
+        Output folder (created).
+    checkpoint : path, optional
+        Default: the shipped :data:`DEFAULT_CHECKPOINT`.
+    threshold : float
+        Flag threshold in (0, 1).
+    figures : bool
+        Also write the PNG figures.
+
+    Returns
+    -------
+    dict
+        The content of ``coupling.json`` plus ``"output"``: its path.
+    """
+    trace_path = Path(trace_path)
+    trace = read_trace(trace_path)         # labels=False
+    module, run, used = load_module(checkpoint)
+    result = predict_trace(trace, module, run, threshold=threshold)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = {"trace": str(trace_path.resolve()), "checkpoint": str(used.resolve()),
+               "model": {"network": type(module.net).__name__,
+                         "forecast": type(module.forecast).__name__,
+                         "hidden_size": int(module.net.hidden_size),
+                         "samples_per_period": int(run["samples_per_period"]),
+                         "horizon": int(run["horizon"])},
+               **result["summary"]}
+    summary["figures"] = _figures(result, out, run) if figures else []
+    _write_json(out / "coupling.json", summary)
+    return {**summary, "output": str(out / "coupling.json")}
+
+
+def coupling_summary(trace: Trace | str | os.PathLike[str], *,
+                     checkpoint: str | os.PathLike[str] | None = None,
+                     threshold: float = 0.5) -> str:
+    """A few lines for a terminal: coupling score / flag and the sweet spot of a trace or sweep.
+
+    Uses the shipped checkpoint unless ``checkpoint`` is given; writes nothing.
+    """
+    module, run, used = load_module(checkpoint)
+    s = predict_trace(trace, module, run, threshold=threshold)["summary"]
+    name = "shipped checkpoint" if checkpoint is None else used.name
+    head = f"QRNN mode-coupling ({type(module.net).__name__}, {name}):"
+    if not s["is_sweep"]:
+        t = s["traces"][0]
+        return (f"{head} score {t['score']:.3f} -> "
+                f"{'coupled' if t['flag'] else 'not coupled'} (threshold {threshold:g}), "
+                f"drive {t['drive_frequency_hz'] / 1e3:.3f} kHz")
+    lines = [head]
+    scores = np.array([t["score"] for t in s["traces"]])
+    k = int(np.argmax(scores))
+    n_flagged = sum(t["flag"] for t in s["traces"])
+    lines.append(f"  {s['n_traces']} sweep points, {n_flagged} flagged coupled "
+                 f"(score >= {threshold:g}); max score {scores[k]:.3f} at "
+                 f"{s['traces'][k]['drive_frequency_hz'] / 1e3:.3f} kHz")
+    for spot in s["sweet_spot"]:
+        iv = spot["interval_hz"]
+        where = ("none" if iv is None
+                 else f"{iv[0] / 1e3:.3f} - {iv[1] / 1e3:.3f} kHz")
+        lines.append(f"  sweet spot ({spot['direction']}): {where}")
+    return "\n".join(lines)

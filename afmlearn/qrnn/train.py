@@ -1,0 +1,211 @@
+"""Train an :class:`~afmlearn.qrnn.module.OrbitModule` from a composed Hydra config.
+
+:func:`train` is the one function behind ``scripts/train_qrnn.py`` and the tests
+(lightning-hydra-template style): everything is built with ``hydra.utils.instantiate`` from the
+``_target_`` nodes of ``conf/train_qrnn.yaml`` and its groups (data, model, trainer, callbacks,
+logger, paths); the network is instantiated first and passed into the module.
+
+Run folder ``paths.output_dir``: ``checkpoints/`` (``last.ckpt`` after every finished epoch and
+the best one by ``val/loss``), ``csv/``, ``tensorboard/``, ``metrics.json`` (written atomically)
+and, with ``export=PATH``, a slim checkpoint (weights and configuration, no optimiser state) as
+:func:`export_checkpoint` writes it.
+
+Resuming: with ``ckpt_path=last`` (the default) a run whose folder already holds
+``checkpoints/last.ckpt`` continues from it -- the epochs finished before an interruption are kept
+(weights, optimiser, scheduler, early-stopping state, epoch and step counters). Reproducible:
+``seed_everything(seed, workers=True)`` and ``trainer.deterministic``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import uuid
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import lightning.pytorch as pl
+import torch
+from hydra.utils import instantiate
+from lightning.pytorch.callbacks import Callback, ModelCheckpoint
+from omegaconf import DictConfig, OmegaConf
+
+from afmlearn.qrnn.evaluate import evaluate
+from afmlearn.qrnn.module import CHECKPOINT_KEY, OrbitModule
+
+__all__ = ["train", "export_checkpoint", "resolve_ckpt_path"]
+
+log = logging.getLogger(__name__)
+
+#: config keys of ``cfg.model`` that are not arguments of the module
+_MODEL_META = ("name", "net")
+
+
+def _instantiate_group(group: DictConfig | None) -> list[Any]:
+    """Instantiate every ``_target_`` node of a group (callbacks, loggers), in order."""
+    if not group:
+        return []
+    return [instantiate(node) for node in group.values()
+            if isinstance(node, DictConfig) and "_target_" in node]
+
+
+def resolve_ckpt_path(ckpt_path: str | None, callbacks: list[Callback]) -> str | None:
+    """The checkpoint to resume from.
+
+    ``"last"`` means ``last.ckpt`` in the folder of the (first) ModelCheckpoint callback if that
+    file exists, else None (start fresh); None stays None; any other value must be an
+    existing file.
+    """
+    if ckpt_path is None:
+        return None
+    if str(ckpt_path) == "last":
+        for cb in callbacks:
+            if isinstance(cb, ModelCheckpoint) and cb.dirpath is not None:
+                last = Path(cb.dirpath) / f"{ModelCheckpoint.CHECKPOINT_NAME_LAST}.ckpt"
+                if last.is_file():
+                    return str(last)
+        return None
+    path = Path(str(ckpt_path))
+    if not path.is_file():
+        raise ValueError(f"ckpt_path must be 'last', null or an existing checkpoint file, got "
+                         f"{ckpt_path!r}")
+    return str(path)
+
+
+def _input_size(datamodule: pl.LightningDataModule) -> tuple[int, int]:
+    """(number of input channels, samples per period) of the data module.
+
+    Read from its ``n_features`` / ``samples_per_period`` attributes when it has them (no data
+    is touched before ``trainer.fit``, so under DDP only rank 0 generates the cache), else from
+    one training batch.
+    """
+    n_features = getattr(datamodule, "n_features", None)
+    samples_per_period = getattr(datamodule, "samples_per_period", None)
+    if n_features and samples_per_period:
+        return int(n_features), int(samples_per_period)
+    datamodule.prepare_data()
+    datamodule.setup("fit")
+    batch = next(iter(datamodule.train_dataloader()))
+    return int(batch["x"].shape[-1]), int(batch["x"].shape[1])
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+    try:
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def export_checkpoint(module: OrbitModule, path: str | os.PathLike[str], *,
+                      metrics: dict[str, float] | None = None) -> Path:
+    """Write a slim checkpoint: ``state_dict`` (float32) + afmlearn metadata, no optimiser.
+
+    The file loads with ``torch.load(..., weights_only=True)`` and with
+    :func:`afmlearn.qrnn.infer.load_module`. Written atomically; returns the path.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    checkpoint: dict[str, Any] = {
+        "state_dict": {k: v.detach().cpu().float() if v.is_floating_point() else v.cpu()
+                       for k, v in module.state_dict().items()},
+    }
+    module.on_save_checkpoint(checkpoint)
+    checkpoint[CHECKPOINT_KEY]["metrics"] = dict(metrics or {})
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+    try:
+        torch.save(checkpoint, tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _floats(metrics: dict[str, Any]) -> dict[str, float]:
+    out = {}
+    for k, v in metrics.items():
+        if isinstance(v, torch.Tensor) and v.numel() == 1:
+            out[k] = float(v)
+        elif isinstance(v, int | float):
+            out[k] = float(v)
+    return out
+
+
+def train(cfg: DictConfig, *, extra_callbacks: Sequence[Callback] = ()
+          ) -> tuple[dict[str, float], dict[str, Any]]:
+    """Fit (and test) the configured model; see the module docstring.
+
+    Parameters
+    ----------
+    cfg : DictConfig
+        ``conf/train_qrnn.yaml`` composed with its groups and overrides.
+    extra_callbacks : sequence of Callback
+        Appended to the configured callbacks (notebooks, tests).
+
+    Returns
+    -------
+    metrics : dict
+        Last logged training / validation values, ``test/...`` losses of the best checkpoint and
+        ``heldout/...`` metrics of :func:`afmlearn.qrnn.evaluate.evaluate` on the test split.
+    objects : dict
+        ``cfg``, ``datamodule``, ``model``, ``trainer``, ``callbacks``, ``loggers``,
+        ``ckpt_path`` (resumed from, or None), ``best_model_path``, ``output_dir``.
+    """
+    if cfg.get("threads"):
+        torch.set_num_threads(int(cfg.threads))
+    pl.seed_everything(int(cfg.seed), workers=True)
+    output_dir = Path(cfg.paths.output_dir)
+    output_dir.mkdir(parents=True, exist_ok=True)
+
+    datamodule = instantiate(cfg.data)
+    n_features, samples_per_period = _input_size(datamodule)
+    net = instantiate(cfg.model.net, input_size=n_features)
+    module_cfg = OmegaConf.create({k: v for k, v in cfg.model.items() if k not in _MODEL_META})
+    model: OrbitModule = instantiate(module_cfg, net=net)
+    model.run_config = {
+        "config": OmegaConf.to_container(cfg, resolve=True),
+        "input_size": n_features,
+        "samples_per_period": samples_per_period,
+        "horizon": int(model.horizon),
+    }
+
+    callbacks = [*_instantiate_group(cfg.get("callbacks")), *extra_callbacks]
+    loggers = _instantiate_group(cfg.get("logger"))
+    trainer: pl.Trainer = instantiate(cfg.trainer, callbacks=callbacks, logger=loggers or False)
+    ckpt_path = resolve_ckpt_path(cfg.get("ckpt_path"), callbacks)
+    if ckpt_path is not None:
+        log.info("resuming from %s", ckpt_path)
+
+    metrics: dict[str, float] = {}
+    if cfg.get("fit", True):
+        trainer.fit(model, datamodule=datamodule, ckpt_path=ckpt_path)
+        metrics.update(_floats(trainer.callback_metrics))
+    metrics["epochs_completed"] = float(trainer.current_epoch)
+    metrics["global_step"] = float(trainer.global_step)
+    best = ""
+    if trainer.checkpoint_callback is not None:
+        best = getattr(trainer.checkpoint_callback, "best_model_path", "") or ""
+    if cfg.get("test", True):
+        test_ckpt = best if best and Path(best).is_file() else None
+        if test_ckpt is None and not cfg.get("fit", True) and ckpt_path is not None:
+            test_ckpt = ckpt_path
+        trainer.test(model, datamodule=datamodule, ckpt_path=test_ckpt, verbose=False)
+        metrics.update(_floats(trainer.callback_metrics))
+        datamodule.setup("test")
+        held = evaluate(model, datamodule.test_dataloader())
+        metrics.update({f"heldout/{k}": v for k, v in held.items()})
+    if trainer.is_global_zero:
+        _atomic_write_text(output_dir / "metrics.json",
+                           json.dumps(metrics, indent=2, sort_keys=True) + "\n")
+        if cfg.get("export"):
+            export_checkpoint(model, cfg.export, metrics=metrics)
+    objects = {"cfg": cfg, "datamodule": datamodule, "model": model, "trainer": trainer,
+               "callbacks": callbacks, "loggers": loggers, "ckpt_path": ckpt_path,
+               "best_model_path": best, "output_dir": output_dir}
+    return metrics, objects

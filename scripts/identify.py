@@ -1,0 +1,48 @@
+"""Identify the tip-sample force of a recorded trace (thin Hydra entry point).
+
+Examples
+--------
+    python scripts/identify.py trace=outputs/trace.h5 out_dir=outputs/identify
+    python scripts/identify.py trace=sweep.h5 row=20 out_dir=out identifier=fast
+
+Writes <out_dir>/result.json, model.json, force.h5 and figures (see
+afmlearn.identify.infer.identify_trace); the file's /labels group is never read. Bad input
+(missing calibration, fewer than 20 samples per drive period, clipped signal, NaN, not a trace
+file, a sweep without `row`) prints `error: ...` and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import hydra
+from hydra.utils import instantiate
+from omegaconf import DictConfig
+
+from afmlearn.identify.infer import identify_trace
+
+
+@hydra.main(config_path="../conf", config_name="identify", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    """Run :func:`afmlearn.identify.infer.identify_trace` and print the equation."""
+    try:
+        identifier = instantiate(cfg.identifier)
+        result = identify_trace(cfg.trace, cfg.out_dir, row=cfg.row, identifier=identifier,
+                                figures=bool(cfg.figures))
+    except ValueError as err:  # InputError, TraceFormatError and bad settings are ValueErrors
+        print(f"error: {err}", file=sys.stderr)
+        sys.exit(2)
+    summary = result["summary"]
+    print(result["equation"])
+    print(result["equation_si"])
+    for key in ("interaction_exponent", "peak_repulsive_force_n", "dissipated_energy_per_cycle_j",
+                "contact_time_s", "state_accuracy_heldout"):
+        value = summary.get(key)
+        print(f"{key:<30}  {value:.6g}" if isinstance(value, float) else f"{key:<30}  {value}")
+    for warning in result["warnings"]:
+        print(f"warning: {warning}")
+    print(f"wrote {result['files']['result']}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,140 @@
+"""scripts/identify.py end to end, and one clear non-zero exit per kind of bad input."""
+
+from __future__ import annotations
+
+import json
+import os
+import runpy
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+
+from afmlearn.io import read_trace
+from afmlearn.simulate import simulate
+
+ROOT = Path(__file__).resolve().parents[2]
+SMALL = ["scenario.n_periods=30", "scenario.samples_per_period=100", "noise.level=0.005",
+         "free_trace_periods=5", "progress=false"]
+
+
+def run_identify(tmp: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    return subprocess.run([sys.executable, str(ROOT / "scripts" / "identify.py"), *args],
+                          cwd=tmp, env=env, capture_output=True, text=True, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def script() -> Path:
+    return ROOT / "scripts" / "identify.py"
+
+
+def run_main(script, monkeypatch, capsys, *args: str) -> tuple[int, str]:
+    """Exit status and stderr of ``python scripts/identify.py *args``, run in this process
+    (``runpy`` as ``__main__``: the imports are paid once for all bad-input cases)."""
+    monkeypatch.setattr(sys, "argv", [str(script), *args])
+    with pytest.raises(SystemExit) as exc:
+        runpy.run_path(str(script), run_name="__main__")
+    return exc.value.code, capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def trace_path(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("cli") / "trace.h5"
+    with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose("simulate", overrides=[*SMALL, f"output={path}"])
+    simulate(cfg)
+    return path
+
+
+def test_identify_writes_result_and_aligned_force(tmp_path, trace_path):
+    out = tmp_path / "out"
+    proc = run_identify(tmp_path, f"trace={trace_path}", f"out_dir={out}", "identifier=fast",
+                        "figures=false")  # figures: tests/afmlearn/identify
+    assert proc.returncode == 0, proc.stderr
+    assert "x'' +" in proc.stdout and "F_ts" in proc.stdout
+    res = json.loads((out / "result.json").read_text())
+    assert res["input"] == str(trace_path.resolve())
+    trace = read_trace(trace_path)
+    with h5py.File(out / "force.h5", "r") as f:
+        force = f["force_n"][()]
+        assert f["force_lo_n"].shape == f["force_hi_n"].shape == trace.deflection_m.shape
+    assert force.shape == trace.deflection_m.shape
+    assert np.isfinite(force).mean() > 0.9
+    # a tapping trace: repulsive peaks of nN size (simulated peak ~ 10 nN), some attraction
+    assert 0.1e-9 < np.nanmax(force) < 1e-6
+    assert res["summary"]["peak_repulsive_force_n"] == pytest.approx(np.nanmax(force))
+    assert (out / "model.json").exists() and not list(out.glob("*.png"))
+    assert (out / ".hydra" / "config.yaml").exists()
+
+
+def _copy(src: Path, dst: Path, edit) -> Path:
+    shutil.copy(src, dst)
+    with h5py.File(dst, "r+") as f:
+        edit(f)
+    return dst
+
+
+def _clip(f: h5py.File) -> None:
+    d = f["deflection_m"][()]
+    f["deflection_m"][...] = np.minimum(d, 0.9 * d.max())
+
+
+def _nan(f: h5py.File) -> None:
+    d = f["deflection_m"][()]
+    d[100:105] = np.nan
+    f["deflection_m"][...] = d
+
+
+def _undersample(f: h5py.File) -> None:
+    f.attrs["sample_rate_hz"] = 15.0 * f.attrs["drive_frequency_hz"]
+
+
+BAD = {
+    "missing_calibration": (lambda f: f.attrs.__delitem__("spring_constant_n_per_m"),
+                            "spring_constant_n_per_m"),
+    "undersampled": (_undersample, "samples per"),
+    "clipped": (_clip, "clip"),
+    "nan": (_nan, "NaN"),
+}
+
+
+def test_bad_input_subprocess_exit_status(tmp_path, trace_path):
+    """The real process: status 2 and a one-line message, no traceback."""
+    edit, needle = BAD["missing_calibration"]
+    bad = _copy(trace_path, tmp_path / "bad.h5", edit)
+    proc = run_identify(tmp_path, f"trace={bad}", f"out_dir={tmp_path / 'out'}",
+                        "identifier=fast")
+    assert proc.returncode == 2, proc.stderr
+    err = proc.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and needle in err[0], proc.stderr
+    assert not (tmp_path / "out" / "result.json").exists()
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_input_exits_non_zero_with_a_clear_message(tmp_path, trace_path, case, script,
+                                                      monkeypatch, capsys):
+    """Each kind of bad input (scripts/identify.py main run in-process: imports paid once)."""
+    edit, needle = BAD[case]
+    bad = _copy(trace_path, tmp_path / "bad.h5", edit)
+    out = tmp_path / "out"
+    code, err = run_main(script, monkeypatch, capsys, f"trace={bad}", f"out_dir={out}",
+                         "identifier=fast")
+    assert code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    assert needle.lower() in lines[0].lower(), lines[0]
+    assert not (out / "result.json").exists()
+
+
+def test_missing_file(tmp_path, script, monkeypatch, capsys):
+    code, err = run_main(script, monkeypatch, capsys, f"trace={tmp_path / 'nope.h5'}",
+                         f"out_dir={tmp_path / 'o'}")
+    assert code == 2
+    assert err.startswith("error: ") and "nope.h5" in err
