@@ -824,9 +824,9 @@ def _knee_on_front(cands: list[Candidate], objectives: tuple[str, ...]) -> int:
     the fewest terms whose fold errors exceed the best candidate's by at most one standard
     error of the paired difference (the folds share their noise, so pairing removes the
     block-to-block scatter common to every candidate). This is where the error curve stops
-    falling beyond its own noise. (Kneedle's geometric elbow, ``selection.knee_point``, stops after the first
-    contact term, because one term removes most of the error; the second, e.g. the adhesion,
-    is still far outside the noise.) Ties go to the lower CV error.
+    falling beyond its own noise. (Kneedle's geometric elbow, ``selection.knee_point``, stops
+    after the first contact term, because one term removes most of the error; the second,
+    e.g. the adhesion, is still far outside the noise.) Ties go to the lower CV error.
     """
     pts = np.array([[c.n_terms, *[c.objective(o) for o in objectives]] for c in cands])
     front = [int(i) for i in pareto_front(pts)]
