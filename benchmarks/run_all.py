@@ -19,12 +19,19 @@ FULL = [
     ["bench_integrator.py"],
     ["bench_vs_solve_ivp.py"],
     ["bench_thesis_sweep.py"],
+    ["bench_identify_speed.py"],
+    ["bench_identify_accuracy.py"],
+    ["bench_qrnn_speed.py"],
+    ["bench_qrnn_accuracy.py"],
 ]
 QUICK = [
     ["bench_integrator.py", "--quick", "--no-doc"],
     ["bench_vs_solve_ivp.py", "--periods", "5", "--no-rk45", "--no-doc"],
     ["bench_thesis_sweep.py", "--points", "21", "--samples", "5000", "--baseline-freqs", "3",
      "--baseline-periods", "3", "--no-doc"],
+    ["bench_identify_speed.py", "--quick"],
+    ["bench_identify_accuracy.py", "--quick"],
+    ["bench_qrnn_accuracy.py", "--quick"],
 ]
 
 

@@ -73,6 +73,8 @@ FloatArray = NDArray[np.float64]
 #: names of the four lever/drive columns that precede the force terms
 LINEAR_TERMS = ("x'", "x", "cos(Omega tau)", "sin(Omega tau)")
 _N_LIN = 4
+#: relative CV improvement below which extra terms are never worth it (see _knee_on_front)
+_PRACTICAL = 0.01
 
 
 @final
@@ -823,8 +825,10 @@ def _knee_on_front(cands: list[Candidate], objectives: tuple[str, ...]) -> int:
     one-standard-error rule (Hastie, Tibshirani & Friedman, section 7.10) with paired folds:
     the fewest terms whose fold errors exceed the best candidate's by at most one standard
     error of the paired difference (the folds share their noise, so pairing removes the
-    block-to-block scatter common to every candidate). This is where the error curve stops
-    falling beyond its own noise. (Kneedle's geometric elbow, ``selection.knee_point``, stops
+    block-to-block scatter common to every candidate), or by at most 1 % of the best error
+    (`_PRACTICAL`): on nearly noiseless data the folds agree so well that any systematic
+    residual of the denoised state (a truncated series) makes dense models "significant".
+    This is where the error curve stops falling beyond its own noise. (Kneedle's geometric elbow, ``selection.knee_point``, stops
     after the first contact term, because one term removes most of the error; the second,
     e.g. the adhesion, is still far outside the noise.) Ties go to the lower CV error.
     """
@@ -837,7 +841,8 @@ def _knee_on_front(cands: list[Candidate], objectives: tuple[str, ...]) -> int:
         d = cands[i].fold_errors - eb
         if d.size < 2 or not np.all(np.isfinite(d)):
             return i == best
-        return float(d.mean()) <= float(d.std(ddof=1)) / np.sqrt(d.size)
+        tol = max(float(d.std(ddof=1)) / np.sqrt(d.size), _PRACTICAL * float(eb.mean()))
+        return float(d.mean()) <= tol
 
     ok = [i for i in front if within(i)]
     return min(ok, key=lambda i: (cands[i].n_terms, cands[i].cv_error))

@@ -10,6 +10,7 @@ SR3 grid's candidates, and the Pareto front decides among all of them.
 
 from __future__ import annotations
 
+import itertools
 import warnings
 from collections.abc import Sequence
 from typing import final
@@ -76,6 +77,9 @@ class ForwardSelection:
         Largest number of added terms (>= 1).
     cross_validate : bool
         Compute the rolling CV errors of each support (False: NaN, faster).
+    exhaustive : int
+        Supports of up to this many added terms are found by enumerating every subset; the
+        greedy steps start from the best of them.
 
     Attributes
     ----------
@@ -86,11 +90,12 @@ class ForwardSelection:
     """
 
     def __init__(self, optimizer: BoxSR3, *, always: Sequence[int], max_terms: int = 6,
-                 cross_validate: bool = True) -> None:
+                 cross_validate: bool = True, exhaustive: int = 2) -> None:
         self.optimizer = optimizer
         self.always = always
         self.max_terms = max_terms
         self.cross_validate = cross_validate
+        self.exhaustive = exhaustive
 
     def fit(self, theta: FloatArray, y: FloatArray, blocks: Sequence[tuple[int, int]],
             prior: tuple[FloatArray, FloatArray] | None = None) -> ForwardSelection:
@@ -107,7 +112,6 @@ class ForwardSelection:
         support[list(self.always)] = True
         stats = _block_stats(theta, y, blocks) if self.cross_validate else None
         cands: list[Candidate] = []
-        path: list[int] = []
 
         def rss_of(c: FloatArray) -> float:
             # direct residual: yy - 2 c.b + c.G.c cancels catastrophically near a perfect fit
@@ -136,7 +140,46 @@ class ForwardSelection:
         c0 = fit(support)
         if c0 is not None:
             cands.append(candidate(support, c0))
-        for _ in range(self.max_terms):
+        # best subsets of up to `exhaustive` added terms by enumeration (cheap: unconstrained
+        # solves on the small Gram blocks, the constrained refit only when a box is violated),
+        # then greedy steps with swaps from the best of them
+        free = [int(j) for j in np.flatnonzero(~support & ~dead)]
+        base = np.flatnonzero(support)
+        lo = np.asarray(self.optimizer.lower, float) if self.optimizer.lower is not None \
+            else np.full(p, -np.inf)
+        hi = np.asarray(self.optimizer.upper, float) if self.optimizer.upper is not None \
+            else np.full(p, np.inf)
+        lo, hi = lo.reshape(-1)[:p], hi.reshape(-1)[:p]
+        start = 0
+        for k in range(1, min(self.exhaustive, self.max_terms, len(free)) + 1):
+            best_k: tuple[float, NDArray[np.bool_], FloatArray] | None = None
+            for combo in itertools.combinations(free, k):
+                idx = np.concatenate([base, combo])
+                try:
+                    sol = np.linalg.solve(G[np.ix_(idx, idx)], b[idx])
+                except np.linalg.LinAlgError:
+                    continue
+                c = np.zeros(p)
+                c[idx] = sol
+                if np.any(c[idx] < lo[idx] - 1e-12) or np.any(c[idx] > hi[idx] + 1e-12):
+                    trial = np.zeros(p, bool)
+                    trial[idx] = True
+                    cc = fit(trial)
+                    if cc is None:
+                        continue
+                    c = cc
+                r = rss_of(c)
+                if best_k is None or r < best_k[0]:
+                    trial = np.zeros(p, bool)
+                    trial[idx] = True
+                    best_k = (r, trial, c)
+            if best_k is None:
+                break
+            cands.append(candidate(best_k[1], best_k[2]))
+            support = best_k[1].copy()
+            start = k
+        path = [int(j) for j in np.flatnonzero(support) if int(j) not in set(base)]
+        for _ in range(start, self.max_terms):
             best, best_rss, best_c = -1, np.inf, None
             for j in np.flatnonzero(~support & ~dead):
                 trial = support.copy()
