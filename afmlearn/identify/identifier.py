@@ -828,8 +828,8 @@ def _knee_on_front(cands: list[Candidate], objectives: tuple[str, ...]) -> int:
     block-to-block scatter common to every candidate), or by at most 1 % of the best error
     (`_PRACTICAL`): on nearly noiseless data the folds agree so well that any systematic
     residual of the denoised state (a truncated series) makes dense models "significant".
-    This is where the error curve stops falling beyond its own noise. (Kneedle's geometric elbow, ``selection.knee_point``, stops
-    after the first contact term, because one term removes most of the error; the second,
+    This is where the error curve stops falling beyond its own noise. (Kneedle's geometric
+    elbow, ``selection.knee_point``, stops after the first contact term, because one term removes most of the error; the second,
     e.g. the adhesion, is still far outside the noise.) Ties go to the lower CV error.
     """
     pts = np.array([[c.n_terms, *[c.objective(o) for o in objectives]] for c in cands])
