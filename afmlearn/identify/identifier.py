@@ -829,8 +829,9 @@ def _knee_on_front(cands: list[Candidate], objectives: tuple[str, ...]) -> int:
     (`_PRACTICAL`): on nearly noiseless data the folds agree so well that any systematic
     residual of the denoised state (a truncated series) makes dense models "significant".
     This is where the error curve stops falling beyond its own noise. (Kneedle's geometric
-    elbow, ``selection.knee_point``, stops after the first contact term, because one term removes most of the error; the second,
-    e.g. the adhesion, is still far outside the noise.) Ties go to the lower CV error.
+    elbow, ``selection.knee_point``, stops after the first contact term, because one term
+    removes most of the error; the second, e.g. the adhesion, is still far outside the
+    noise.) Ties go to the lower CV error.
     """
     pts = np.array([[c.n_terms, *[c.objective(o) for o in objectives]] for c in cands])
     front = [int(i) for i in pareto_front(pts)]
