@@ -576,20 +576,12 @@ class ForceIdentifier:
         the calibration priors fix ``K`` and ``D`` and the higher harmonics fix the force, so
         the free drive's phase is set by the data; its amplitude is then boxed.
         """
-        des = self._design(library, a0)
-        fwd = ForwardSelection(self._template(), always=range(_N_LIN), max_terms=3,
-                               cross_validate=False)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            fwd.fit(des.theta, des.y, self._bound.blocks, prior=self._prior_gram(des))
-        n = des.y.size
-        best = min(fwd.candidates_,
-                   key=lambda c: n * np.log(max(c.rss, 1e-300) / n) + 2 * c.n_terms)
+        best, _ = self._short_models(library, a0)
         c = best.coef[0]
         return float(math.atan2(c[3], c[2]))
 
-    def _profile_objective(self, library: AFMLibrary, a0: float) -> float:
-        """Best AIC over short forward-selected supports at ``a0`` (smaller is better)."""
+    def _short_models(self, library: AFMLibrary, a0: float) -> tuple[Candidate, float]:
+        """Best (by AIC) of the forward-selected supports with up to three force terms."""
         des = self._design(library, a0)
         fwd = ForwardSelection(self._template(), always=range(_N_LIN), max_terms=3,
                                cross_validate=False)
@@ -597,8 +589,13 @@ class ForceIdentifier:
             warnings.simplefilter("ignore")
             fwd.fit(des.theta, des.y, self._bound.blocks, prior=self._prior_gram(des))
         n = des.y.size
-        return float(min(n * np.log(max(c.rss, 1e-300) / n) + 2 * c.n_terms
-                         for c in fwd.candidates_))
+        aic = [n * np.log(max(c.rss, 1e-300) / n) + 2 * c.n_terms for c in fwd.candidates_]
+        i = int(np.argmin(aic))
+        return fwd.candidates_[i], float(aic[i])
+
+    def _profile_objective(self, library: AFMLibrary, a0: float) -> float:
+        """Best AIC over short forward-selected supports at ``a0`` (smaller is better)."""
+        return self._short_models(library, a0)[1]
 
     def _refit(self, des: _Design, support: NDArray[np.bool_]) -> FloatArray:
         G, b = self._gram(des)

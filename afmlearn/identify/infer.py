@@ -28,7 +28,6 @@ would hide which drive frequency the result belongs to.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import time
@@ -39,7 +38,7 @@ import h5py
 import numpy as np
 
 import afmlearn
-from afmlearn.io import Trace, read_trace
+from afmlearn.io import Trace, jsonable, read_trace, write_json
 from afmlearn.io._atomic import atomic_path
 from afmlearn.preprocess import Calibrated, calibrate, check_trace
 
@@ -295,28 +294,3 @@ def write_force_h5(path: str | os.PathLike[str], ide: ForceIdentifier, cal: Cali
         f.attrs["heldout_start"] = int(ide.heldout_start_)
         f.attrs["nan_means"] = "force undefined (or row not identified)"
     return path
-
-
-def write_json(path: str | os.PathLike[str], data: Any) -> Path:
-    """Write ``data`` as indented JSON atomically (NaN/inf become null)."""
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(jsonable(data), indent=2, allow_nan=False) + "\n")
-    return path
-
-
-def jsonable(tree: Any) -> Any:
-    """Convert NumPy scalars/arrays and tuples to plain JSON types; NaN/inf -> None."""
-    if isinstance(tree, dict):
-        return {str(k): jsonable(v) for k, v in tree.items()}
-    if isinstance(tree, list | tuple):
-        return [jsonable(v) for v in tree]
-    if isinstance(tree, np.ndarray):
-        return jsonable(tree.tolist())
-    if isinstance(tree, np.generic):
-        return jsonable(tree.item())
-    if isinstance(tree, float):
-        return tree if math.isfinite(tree) else None
-    if tree is None or isinstance(tree, bool | int | str):
-        return tree
-    return repr(tree)

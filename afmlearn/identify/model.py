@@ -9,7 +9,6 @@ with ``F_ts = sum_j c_j theta_j`` (``F_ts > 0`` repulsive), everything dimension
 from __future__ import annotations
 
 import json
-import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +17,7 @@ from typing import Any, final
 import numpy as np
 from numpy.typing import NDArray
 
+from afmlearn.io import jsonable, write_json
 from simulator import Scales
 
 from ._simulate import simulate_rk4
@@ -175,7 +175,7 @@ class IdentifiedModel:
                        "resonance_frequency": sc.resonance_frequency, "length": sc.length},
             "equation": self.equation(), "equation_si": self.equation_si(),
             "si_terms": self.si_terms(),
-            "info": _jsonable(self.info),
+            "info": jsonable(self.info),
         }
 
     @classmethod
@@ -197,10 +197,7 @@ class IdentifiedModel:
         """Write the JSON atomically; returns the path."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.tmp")
-        tmp.write_text(json.dumps(self.to_dict(), indent=2))
-        os.replace(tmp, path)
-        return path
+        return write_json(path, self.to_dict())
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> IdentifiedModel:
@@ -242,17 +239,3 @@ def _unit(length_pow: float, rate_pow: float) -> str:
     if rate_pow:
         parts.append(f"(m/s)^{-rate_pow:g}")
     return " " + " ".join(parts) if parts else ""
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x

@@ -12,11 +12,14 @@ Public API
     Folders of shard files with a ``manifest.json``.
 `TraceFormatError`
     Raised for files that break the format.
+`jsonable`, `write_json`
+    Plain-JSON conversion (NaN/inf -> null) and atomic JSON files.
 """
 
 from afmlearn.io._format import FORMAT, FORMAT_VERSION
 from afmlearn.io.dataset import MANIFEST, iter_traces, shard_path, write_manifest
 from afmlearn.io.errors import TraceFormatError
+from afmlearn.io.jsonfile import jsonable, write_json
 from afmlearn.io.labels import Labels
 from afmlearn.io.reader import TraceReader, read_rows, read_trace
 from afmlearn.io.trace import Trace
@@ -32,9 +35,11 @@ __all__ = [
     "TraceReader",
     "TraceWriter",
     "iter_traces",
+    "jsonable",
     "read_rows",
     "read_trace",
     "shard_path",
+    "write_json",
     "write_manifest",
     "write_trace",
 ]

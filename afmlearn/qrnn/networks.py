@@ -101,8 +101,26 @@ class QRNNNet(AbstractSequenceNet):
         return h
 
 
+class _TorchRecurrentNet(AbstractSequenceNet):
+    """A `torch.nn` recurrent layer stack (batch-first) as a sequence net; see LSTMNet/GRUNet."""
+
+    _rnn_type: type[nn.RNNBase]
+
+    def __init__(self, input_size: int, hidden_size: int, *, num_layers: int = 2,
+                 dropout: float = 0.0) -> None:
+        super().__init__()
+        self._check_sizes(input_size, hidden_size, num_layers)
+        self.rnn = self._rnn_type(input_size, hidden_size, num_layers=num_layers,
+                                  batch_first=True, dropout=_check_prob("dropout", dropout))
+
+    def encode(self, x: Tensor) -> Tensor:
+        self._check_x(x)
+        h, _ = self.rnn(x)
+        return h
+
+
 @typing.final
-class LSTMNet(AbstractSequenceNet):
+class LSTMNet(_TorchRecurrentNet):
     """Baseline: `torch.nn.LSTM` (batch-first) of the given size.
 
     Parameters
@@ -115,41 +133,11 @@ class LSTMNet(AbstractSequenceNet):
         Dropout between layers, in [0, 1).
     """
 
-    def __init__(self, input_size: int, hidden_size: int, *, num_layers: int = 2,
-                 dropout: float = 0.0) -> None:
-        super().__init__()
-        self._check_sizes(input_size, hidden_size, num_layers)
-        self.rnn = nn.LSTM(input_size, hidden_size, num_layers=num_layers, batch_first=True,
-                           dropout=_check_prob("dropout", dropout))
-
-    def encode(self, x: Tensor) -> Tensor:
-        self._check_x(x)
-        h, _ = self.rnn(x)
-        return h
+    _rnn_type = nn.LSTM
 
 
 @typing.final
-class GRUNet(AbstractSequenceNet):
-    """Baseline: `torch.nn.GRU` (batch-first) of the given size.
+class GRUNet(_TorchRecurrentNet):
+    """Baseline: `torch.nn.GRU` (batch-first) of the given size; parameters as `LSTMNet`."""
 
-    Parameters
-    ----------
-    input_size, hidden_size : int
-        Input features and hidden units per layer (``>= 1``).
-    num_layers : int
-        Stacked layers ``>= 1``.
-    dropout : float
-        Dropout between layers, in [0, 1).
-    """
-
-    def __init__(self, input_size: int, hidden_size: int, *, num_layers: int = 2,
-                 dropout: float = 0.0) -> None:
-        super().__init__()
-        self._check_sizes(input_size, hidden_size, num_layers)
-        self.rnn = nn.GRU(input_size, hidden_size, num_layers=num_layers, batch_first=True,
-                          dropout=_check_prob("dropout", dropout))
-
-    def encode(self, x: Tensor) -> Tensor:
-        self._check_x(x)
-        h, _ = self.rnn(x)
-        return h
+    _rnn_type = nn.GRU
