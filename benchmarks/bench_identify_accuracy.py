@@ -90,6 +90,10 @@ def _acc_summary(acc: dict[str, dict[str, float]]) -> dict[str, dict[str, float]
     return {k: {kk: float(vv) for kk, vv in v.items()} for k, v in acc.items()}
 
 
+#: (git HEAD, identify-sources hash) when this invocation started: the code it imported
+RUN_START: tuple[str, str, str] = ("unknown", "unknown", "unknown")
+
+
 def run_identifier(case: IC.Case) -> dict[str, Any]:
     path, t_sim = IC.trace_for(case)
     cal = calibrate(IC.read_trace(path))
@@ -106,7 +110,8 @@ def run_identifier(case: IC.Case) -> dict[str, Any]:
     m = ide.model_
     out = {
         "case": case.key, "sim_time_s": t_sim, "fit_time_s": t_fit,
-        "n_samples": int(cal.n_samples), "identify_hash": identify_hash(), "git": git_short(),
+        "n_samples": int(cal.n_samples), "git": RUN_START[0], "identify_hash": RUN_START[1],
+        "run_start": RUN_START[2],
         "acc": _acc_summary(IC.accuracy(ide.force_, truth)),
         "state_accuracy": float(ide.summary_.get("state_accuracy_heldout", math.nan)),
         "exponent": ide.summary_.get("interaction_exponent"),
@@ -301,8 +306,11 @@ def main(argv: list[str] | None = None) -> str:
                     help="200 samples/period, 300 periods, 2 models, one map cell")
     C.add_doc_flag(ap)
     args = ap.parse_args(argv)
+    global RUN_START
+    RUN_START = (git_short(), identify_hash(), time.strftime("%Y-%m-%d %H:%M %Z"))
     info = C.machine_info()
-    info["identify sources (afmlearn/identify/**/*.py) sha256"] = identify_hash()
+    info["identify sources (afmlearn/identify/**/*.py) sha256 at this invocation's start"] = \
+        RUN_START[1]
     t_start = time.time()
     if args.quick:
         periods, spp1 = 300, 200
@@ -318,6 +326,7 @@ def main(argv: list[str] | None = None) -> str:
     t1_cases = [IC.Case(m, 0.01, spp1, periods) for m in models]
     map_cases = [IC.Case("dmt", n, s, periods) for n, s in grid]
     exp_cases = [(p, exponent_case(p, noise=0.01, spp=spp1, periods=periods)) for p in exps]
+    n_before = len(store.data)
     for c in t1_cases:
         ensure(store, c, baselines=False)
     for c in map_cases:
@@ -325,8 +334,16 @@ def main(argv: list[str] | None = None) -> str:
     for _, c in exp_cases:
         ensure(store, c, baselines=False)
     wall = time.time() - t_start
+    if len(store.data) > n_before:  # this invocation computed something: log its run
+        store.put(f"run/{RUN_START[2]}", {
+            "load": info["load average at start (1/5/15 min)"], "wall_min": wall / 60,
+            "git": RUN_START[0], "identify_hash": RUN_START[1],
+            "new_entries": len(store.data) - n_before})
+    runs = "; ".join(f"started {k[4:]}: load at start {v['load']}, {v['new_entries']} new "
+                     f"results in {v['wall_min']:.0f} min"
+                     for k, v in sorted(store.data.items()) if k.startswith("run/"))
 
-    hashes = sorted({(v.get("git", "?"), v.get("identify_hash", "?"))
+    hashes = sorted({(v.get("git", "?"), v.get("identify_hash", "?"), v.get("run_start", "?"))
                      for k, v in store.data.items() if k.startswith("ide/") and "git" in v})
     t1, t1c = table_models(store, t1_cases)
     tmw, tmr = table_map(store, map_cases)
@@ -344,9 +361,11 @@ true modal deflection) and the TRUE a0 (LJ: zero of the force), near a0 = |z - a
 The identified force is `ForceIdentifier.force_` on every sample (the 30 % held-out span
 included). State accuracy: `summary_["state_accuracy_heldout"]` (1 - mean NRMSE of x, x', x''
 of the identified model simulated over the held-out span). Code versions (git HEAD,
-identify-sources hash) of the results in this section: {", ".join(f"{g} / {h}" for g, h in hashes)}.
-Total wall time of this invocation {wall / 60:.1f} min (cached traces and finished cases are
-reused; the per-case `fit [s]` is the identifier's own wall time on the loaded machine).
+identify-sources hash, both at the start of the invocation that computed the case) of the
+results in this section: {", ".join(f"{g} / {h} (run started {t})" for g, h, t in hashes)}.
+Runs that computed these results (the machine block above belongs to the invocation that
+last wrote this section; cached traces and finished cases are reused): {runs}. The per-case
+`fit [s]` is the identifier's own wall time on the shared, loaded machine.
 
 ### 1. Standard models, 1 % noise, {spp1} samples/period
 
@@ -385,9 +404,10 @@ Repulsive part (z <= a0), force accuracy %:
 
 p = 1.5 is `force=dmt` (table 1's trace); p = 2 and 2.27 are `force=dmt_cone` with
 `force.exponent=p` and `force.contact_coefficient` set so that the contact force at an
-indentation of {DELTA_MATCH} L_ref equals the sphere's (the config default `(4/3) E* R^(p-1)`
-is not dimensionally consistent for p != 1.5: `force.exponent=2.0` alone gives a dimensionless
-stiffness of 1.9e-8 instead of ~2, i.e. no contact). Identified exponent =
+indentation of {DELTA_MATCH} L_ref equals the sphere's, so that the three traces differ in
+the exponent only (the config default `(4/3) E* R^(2-p)` keeps the units of a force for every
+p; up to 2026-11-21 it read `R^(p-1)`, wrong for p != 1.5 — fixed in `simulator/forces/dmt.py`
+and tested). Identified exponent =
 `summary_["interaction_exponent"]` (the `delta^p` term with the largest RMS contribution; after
 refinement). Goal: within ±0.1.
 

@@ -129,9 +129,11 @@ class IdentifiedModel:
         p = precision
         terms = " ".join(f"{'+' if c >= 0 else '-'} {abs(c):.{p}g} {n}"
                          for c, n in zip(self.coefficients, self.library.names, strict=True))
+        ph = self.drive_phase
         return (f"x'' + {self.damping:.{p}g} x' + {self.stiffness:.{p}g} x = -F_ts + "
-                f"{self.drive_amplitude:.{p}g} cos({self.omega:.{p}g} tau - "
-                f"{self.drive_phase:.{p}g});  F_ts = {terms.lstrip('+ ')};  z = "
+                f"{self.drive_amplitude:.{p}g} cos({self.omega:.{p}g} tau "
+                f"{'-' if ph >= 0 else '+'} {abs(ph):.{p}g});  F_ts = "
+                f"{terms.lstrip('+ ') or '0'};  z = "
                 f"{self.gap:.{p}g} - x, a0 = {self.a0:.{p}g}")
 
     def si_terms(self) -> list[dict[str, Any]]:
@@ -153,7 +155,7 @@ class IdentifiedModel:
         parts = [f"{'+' if d['coefficient'] >= 0 else '-'} {abs(d['coefficient']):.{p}g} "
                  f"[{d['unit']}] {d['term']}" for d in self.si_terms()]
         sc = self.scales
-        return (f"F_ts [N] = {' '.join(parts).lstrip('+ ')};  z [m] = gap - x, a0 = "
+        return (f"F_ts [N] = {' '.join(parts).lstrip('+ ') or '0'};  z [m] = gap - x, a0 = "
                 f"{self.a0 * sc.length:.{p}g} m, gap = {self.gap * sc.length:.{p}g} m; "
                 f"m x_tt + c x_t + k x = -F_ts + F0 cos(w t - phi) with k = "
                 f"{sc.spring_constant * self.stiffness:.{p}g} N/m, Q = "

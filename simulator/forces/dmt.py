@@ -25,8 +25,10 @@ def dmt_coefficients_from_si(
 ) -> dict[str, float]:
     """Dimensionless ``a0``, ``vdw``, ``stiffness`` from SI quantities.
 
-    The contact law is ``kappa * delta**p`` with ``kappa = (4/3) E* R**(p - 1)`` unless
-    ``contact_coefficient`` (SI, N / m**p) is given; ``p = 1.5`` is Hertz/DMT for a sphere.
+    The contact law is ``kappa * delta**p`` with the sphere-scaled prefactor
+    ``kappa = (4/3) E* R**(2 - p)`` [N / m**p] unless ``contact_coefficient`` (SI, N / m**p) is
+    given: ``F = (4/3) E* R**2 (delta / R)**p`` equals the Hertz force at ``delta = R`` for every
+    ``p`` and is Hertz/DMT itself for ``p = 1.5``.
     The tail ``-c / z**2`` is tied to the adhesion force by continuity at ``a0``:
     ``c = F_ad a0**2``.
     """
@@ -36,7 +38,7 @@ def dmt_coefficients_from_si(
     a0 = check_range("a0_m", a0_m, low=0.0, low_open=True)
     p = check_range("exponent", exponent, low=1.0, high=4.0)
     fad = check_range("adhesion_force_n", adhesion_force_n, low=0.0)
-    kappa = (4.0 / 3.0) * e * r ** (p - 1.0) if contact_coefficient is None else float(
+    kappa = (4.0 / 3.0) * e * r ** (2.0 - p) if contact_coefficient is None else float(
         check_range("contact_coefficient", contact_coefficient, low=0.0, low_open=True))
     return {
         "a0": a0 / ell,

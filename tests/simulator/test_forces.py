@@ -254,6 +254,25 @@ def test_contact_models_from_si() -> None:
     assert (v.vdw, v.stiffness) == (d.vdw, d.stiffness)
 
 
+@pytest.mark.parametrize("p", [1.0, 1.5, 2.0, 2.27, 3.0])
+def test_contact_prefactor_has_the_units_of_a_force_for_every_exponent(p: float) -> None:
+    """``(4/3) E* R**(2-p) delta**p`` is a force: at ``delta = R`` it is ``(4/3) E* R**2``.
+
+    Halving every length (R, delta, a0, L_ref) must scale the force by 1/4 for every ``p``
+    (E* * length**2); a prefactor with the wrong length power breaks this for ``p != 1.5``.
+    """
+    def force_n(scale: float) -> float:
+        r, ell = 10e-9 * scale, 10e-9 * scale
+        sc = Scales(spring_constant=40.0, resonance_frequency=3e5, length=ell)
+        d = DMT.from_si(hamaker_j=0.0, tip_radius_m=r, reduced_modulus_pa=1e9,
+                        a0_m=0.3e-9 * scale, exponent=p, scales=sc)
+        delta = r  # indentation of one tip radius
+        return float(d(d.a0 - delta / ell, 0.0)) * sc.spring_constant * ell
+
+    assert force_n(1.0) == pytest.approx(4.0 / 3.0 * 1e9 * (10e-9) ** 2, rel=1e-9)
+    assert force_n(0.5) == pytest.approx(force_n(1.0) / 4.0, rel=1e-9)
+
+
 def test_long_range_models_from_si() -> None:
     # exponential damping 1e-7 N s/m: c = c_SI omega0 / k = 4.712389e-3; decay 2 nm -> 0.2
     e = ExponentialDamping.from_si(coefficient_ns_per_m=1e-7, decay_length_m=2e-9, scales=SCALES)

@@ -113,6 +113,18 @@ class AbstractTerm(abc.ABC):
         """True when the term vanishes out of contact (``z > a0``)."""
         return False
 
+    @property
+    def sign(self) -> int:
+        """Physically allowed sign of the force coefficient: +1 (>= 0), -1 (<= 0), 0 (free).
+
+        Passivity and positive elasticity: an elastic contact pushes the tip out (``delta^p``:
+        +1), a damping term removes energy (``c g(z) z'`` with ``g >= 0`` does work
+        ``c g z'^2`` on the tip, so ``c <= 0``; ``delta^p delta'``: +1), an electrostatic
+        sphere--plane force attracts (-1), van der Waals powers ``z^-n``, ``n <= 6``, attract
+        and Pauli walls, ``n >= 7``, repel. Terms that can act either way return 0.
+        """
+        return 0
+
     def latex(self) -> str:
         """Name in a form suited to figure labels (mathtext)."""
         return self.name

@@ -36,6 +36,12 @@ class ContactIndicator(AbstractTerm):
     def contact_only(self) -> bool:
         return True
 
+    @property
+    def sign(self) -> int:
+        # a force that switches on at contact is adhesion (JKR neck, meniscus, the long-range
+        # force held at a0): attractive; a repulsive step would be an infinitely stiff onset
+        return -1
+
     def evaluate(self, s: TermInput) -> FloatArray:
         return s.in_contact.astype(np.float64)
 
@@ -66,6 +72,10 @@ class Indentation(AbstractTerm):
     @property
     def contact_only(self) -> bool:
         return True
+
+    @property
+    def sign(self) -> int:
+        return 1
 
     def evaluate(self, s: TermInput) -> FloatArray:
         return s.indentation ** self.p
@@ -108,6 +118,10 @@ class IndentationRate(AbstractTerm):
     @property
     def contact_only(self) -> bool:
         return True
+
+    @property
+    def sign(self) -> int:
+        return 1 if self.l == 1 else 0
 
     def evaluate(self, s: TermInput) -> FloatArray:
         d = s.indentation

@@ -41,6 +41,10 @@ class ExponentialDamping(AbstractTerm):
     def uses_velocity(self) -> bool:
         return True
 
+    @property
+    def sign(self) -> int:
+        return -1
+
     def evaluate(self, s: TermInput) -> FloatArray:
         return np.exp(-s.z / self.decay_length) * s.zdot
 
@@ -78,6 +82,11 @@ class GapRate(AbstractTerm):
     @property
     def uses_velocity(self) -> bool:
         return True
+
+    @property
+    def sign(self) -> int:
+        # z^p > 0 out of contact, so c z^p z' is dissipative for c <= 0
+        return -1 if self.l == 1 else 0
 
     def evaluate(self, s: TermInput) -> FloatArray:
         out = np.zeros_like(s.z)

@@ -39,6 +39,13 @@ class InversePower(AbstractTerm):
     def params(self) -> tuple[float, float]:
         return (float(self.n), 0.0)
 
+    @property
+    def sign(self) -> int:
+        # van der Waals-type powers attract (positive Hamaker constant), Pauli-type walls
+        # (LJ z^-8) repel; a negative Hamaker constant (dissimilar media in a liquid) needs
+        # ForceIdentifier(physical_signs=False)
+        return -1 if self.n <= 6 else 1
+
     def evaluate(self, s: TermInput) -> FloatArray:
         return np.maximum(s.z, s.a0) ** (-self.n)
 
@@ -65,6 +72,10 @@ class SphereElectrostatic(AbstractTerm):
     @property
     def params(self) -> tuple[float, float]:
         return (float(self.radius), 0.0)
+
+    @property
+    def sign(self) -> int:
+        return -1
 
     def evaluate(self, s: TermInput) -> FloatArray:
         z = np.maximum(s.z, s.a0)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -89,6 +91,77 @@ def test_harmonic_balance_rows_vanish_for_the_true_model(tmp_path, run_sim):
     assert np.sqrt(np.mean(resid ** 2)) < 2e-4 * np.sqrt(np.mean(des.y ** 2))
 
 
+def test_term_signs_follow_the_physics():
+    """Elastic contact repels, adhesion and van der Waals attract, damping dissipates."""
+    assert Indentation(1.5).sign == 1
+    assert IndentationRate(0.5).sign == 1
+    assert ContactIndicator().sign == -1
+    assert InversePower(2.0).sign == -1
+    assert InversePower(8.0).sign == 1
+    assert ExponentialDamping(0.1).sign == -1
+
+
+@pytest.fixture(scope="module")
+def dmt_fit(tmp_path_factory):
+    """DMT tapping, 1 % noise, 60 periods x 300 samples, identified with the small library."""
+    from afmlearn.simulate import simulate
+    from tests.afmlearn.conftest import _compose  # noqa: PLC0415 - shared composer
+
+    out = tmp_path_factory.mktemp("dmt") / "dmt.h5"
+    simulate(_compose([f"output={out}", "force=dmt", "noise.level=0.01",
+                       "scenario.samples_per_period=300", "scenario.n_periods=60"]))
+    tr = read_trace(out, labels=True)
+    return tr, ForceIdentifier(**FAST).fit(tr)
+
+
+def test_physical_signs_bound_every_candidate(dmt_fit):
+    """No candidate support, nor the bagged bands, has a coefficient of the unphysical sign."""
+    _, ide = dmt_fit
+    lib = ide.model_.library
+    for c in ide.candidates_:
+        coef = np.asarray(c.coef[0])[-len(SMALL.terms):]
+        sg = np.array([t.sign for t in SMALL.terms])
+        assert np.all(coef * sg >= -1e-12), (c.n_terms, coef)
+    sg = np.array([t.sign for t in lib.terms])
+    assert np.all(ide.model_.coefficients * sg >= -1e-12)
+    if ide.model_.coefficient_bands is not None:
+        assert np.all(ide.model_.coefficient_bands * sg >= -1e-12)
+
+
+def _true_drive_phase(tr) -> float:
+    """Drive phase of the noise-free equation, from the labels' fundamental balance.
+
+    ``x'' + D x' + x = -F + B cos(Omega tau - phi)`` projected on ``e^{-i Omega tau}``:
+    ``(1 - Omega^2 + i Omega D) X_1 + F_1 = B e^{-i phi}``.
+    """
+    k, ell = tr.spring_constant_n_per_m, tr.gap_m
+    f = tr.labels.force_n / (k * ell)
+    x = np.asarray(tr.labels.modal_m).reshape(-1, f.size).sum(0) / ell
+    w0 = 2 * np.pi * tr.resonance_frequency_hz
+    om = tr.drive_frequency_hz * 2 * np.pi / w0
+    tau = w0 * np.asarray(tr.time_s)
+    n = int(np.floor(tau[-1] * om / (2 * np.pi)) * 2 * np.pi / om / (tau[1] - tau[0]))
+    e = np.exp(-1j * om * tau[:n])
+    x1, f1 = 2 * np.mean(x[:n] * e), 2 * np.mean(f[:n] * e)
+    rhs = (1 - om**2 + 1j * om / tr.quality_factor) * x1 + f1
+    return float(-np.angle(rhs))
+
+
+def test_drive_phase_is_the_data_s_and_not_the_mirror_root(dmt_fit):
+    """The chosen drive phase matches the noise-free balance; the mirror root loses.
+
+    On a tapping orbit the two conservative roots of the fundamental's balance (force
+    gradient of either sign) lie far apart (here ~1.6 rad); picking the wrong one flips the
+    sign of the fitted force's fundamental.
+    """
+    tr, ide = dmt_fit
+    phi_true = _true_drive_phase(tr)
+    assert len(ide.drive_phase_candidates_) >= 2
+    d = [abs(math.remainder(p - phi_true, 2 * math.pi)) for p, _ in ide.drive_phase_candidates_]
+    assert max(d) > 0.5  # a far (mirror) candidate was considered ...
+    assert abs(math.remainder(ide.model_.drive_phase - phi_true, 2 * math.pi)) < 0.1  # ... and lost
+
+
 def test_force_vs_gap_splits_approach_and_retraction():
     tau = np.linspace(0, 4 * np.pi, 4001)
     z = 1 - np.cos(tau)
@@ -100,7 +173,9 @@ def test_force_vs_gap_splits_approach_and_retraction():
 
 @pytest.mark.parametrize("kw", [dict(n_folds=1), dict(heldout_fraction=0.9), dict(n_a0=2),
                                 dict(n_bootstrap=-1), dict(substeps=0),
-                                dict(library="dmt"), dict(projection="weak")])
+                                dict(library="dmt"), dict(projection="weak"),
+                                dict(a0_range_m=(3e-9, 1e-9)), dict(a0_range_m=(0.0, 1e-9)),
+                                dict(a0_range_m=(1e-10, float("inf")))])
 def test_bad_settings_raise(kw, lj_trace):
     with pytest.raises(ValueError):
         ForceIdentifier(**kw).fit(lj_trace)

@@ -14,7 +14,7 @@ SC = Scales(spring_constant=20.0, resonance_frequency=3e5, length=1e-8)
 
 
 def _model(lib=None, coefs=(-8e-6, 1.9), **kw) -> IdentifiedModel:
-    lib = lib or AFMLibrary([InversePower(2.0), Indentation(1.5)])
+    lib = lib if lib is not None else AFMLibrary([InversePower(2.0), Indentation(1.5)])
     base = dict(stiffness=1.0, damping=1 / 400, drive_amplitude=1.5 / 400, drive_phase=0.3,
                 omega=1.0, a0=0.03, gap=1.0, scales=SC)
     base.update(kw)
@@ -71,6 +71,16 @@ def test_simulation_converges_to_solve_ivp_with_contact():
     assert np.max(np.abs(v - ref.y[1])) < 2e-3 * np.ptp(ref.y[1])
 
 
+def test_equation_text_signs_and_empty_force():
+    """A negative phase reads ``+ |phi|``; a model without force terms reads ``F_ts = 0``."""
+    m = _model(drive_phase=-0.25)
+    assert "cos(1 tau + 0.25)" in m.equation()
+    assert "cos(1 tau - 0.3)" in _model().equation()
+    empty = _model(lib=AFMLibrary([InversePower(2.0)]).subset([False]), coefs=())
+    assert "F_ts = 0;" in empty.equation()
+    assert "F_ts [N] = 0;" in empty.equation_si()
+
+
 def test_si_equation_units():
     m = _model()
     terms = {d["term"]: d for d in m.si_terms()}
@@ -85,3 +95,12 @@ def test_bad_inputs():
         _model(coefs=(1.0,))
     with pytest.raises(ValueError, match="n_samples"):
         _model().simulate(0, 0, tau0=0, dtau=0.1, n_samples=0)
+
+
+def test_no_interaction_model_round_trips(tmp_path):
+    """The empty ("no interaction") model saves, loads, evaluates to 0 and simulates."""
+    empty = _model(lib=AFMLibrary([InversePower(2.0)]).subset([False]), coefs=())
+    m2 = IdentifiedModel.load(empty.save(tmp_path / "m.json"))
+    assert m2.library.n_terms == 0
+    z = np.linspace(0.1, 2.0, 7)
+    np.testing.assert_array_equal(m2.force(z, 0 * z), 0.0)
