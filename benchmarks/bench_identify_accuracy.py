@@ -115,6 +115,7 @@ def run_identifier(case: IC.Case) -> dict[str, Any]:
         "acc": _acc_summary(IC.accuracy(ide.force_, truth)),
         "state_accuracy": float(ide.summary_.get("state_accuracy_heldout", math.nan)),
         "exponent": ide.summary_.get("interaction_exponent"),
+        "exponent_interval": ide.summary_.get("interaction_exponent_interval"),
         "equation": m.equation(), "ic_equation": ide.ic_model_.equation(),
         "terms": dict(zip(m.library.names, map(float, m.coefficients), strict=True)),
         "a0": float(m.a0), "a0_true": float(truth.a0),
@@ -288,14 +289,17 @@ def table_exponents(store: Store, cases: list[tuple[float, IC.Case]]) -> str:
         if r is None:
             continue
         if "error" in r:
-            rows.append([f"{p:g}", f"failed: {r['error']}", "", "", "", "", ""])
+            rows.append([f"{p:g}", f"failed: {r['error']}", "", "", "", "", "", ""])
             continue
         e = r["exponent"]
+        ci = r.get("exponent_interval")
         rows.append([f"{p:g}", "—" if e is None else f"{e:.3f}",
-                     "—" if e is None else f"{e - p:+.3f}", pct(_a(r, "whole")),
+                     "—" if e is None else f"{e - p:+.3f}",
+                     "—" if not ci else f"{ci[0]:.2f} – {ci[1]:.2f}", pct(_a(r, "whole")),
                      pct(_a(r, "repulsive")), f"{r['fit_time_s']:.0f}",
                      f"`{r['equation']}`"])
-    return C.md_table(["true exponent", "identified", "error", "force acc. whole %",
+    return C.md_table(["true exponent", "identified", "error", "95 % profile interval",
+                       "force acc. whole %",
                        "repulsive %", "fit [s]", "identified F_ts"], rows)
 
 
@@ -409,7 +413,10 @@ the exponent only (the config default `(4/3) E* R^(2-p)` keeps the units of a fo
 p; up to 2026-11-21 it read `R^(p-1)`, wrong for p != 1.5 — fixed in `simulator/forces/dmt.py`
 and tested). Identified exponent =
 `summary_["interaction_exponent"]` (the `delta^p` term with the largest RMS contribution; after
-refinement). Goal: within ±0.1.
+refinement); its 95 % profile-likelihood interval (`summary_["interaction_exponent_interval"]`:
+the exponent swept over 0.5 … 4 with `a0` and the coefficients re-fitted, likelihood ratio
+< 3.84; an interval reaching 0.5 or 4 means the data do not bound the exponent). Goal:
+within ±0.1.
 
 {te}
 """

@@ -136,9 +136,12 @@ def _identify(path: str, out_dir: Path) -> None:
     print(f"  force (SI): {m.equation_si()}")
     s = ide.summary_
     exp = s["interaction_exponent"]
+    ci = s.get("interaction_exponent_interval")
+    exp_txt = "n/a" if exp is None else f"{exp:.2f}" + (
+        f" (95 % profile interval {ci[0]:.2f}-{ci[1]:.2f})" if ci else "")
     print(f"  peak repulsive force {s['peak_repulsive_force_n'] * 1e9:.2f} nN, contact time "
           f"{s['contact_time_s'] * 1e9:.0f} ns, interaction exponent "
-          f"{'n/a' if exp is None else f'{exp:.2f}'}, held-out state accuracy "
+          f"{exp_txt}, held-out state accuracy "
           f"{s['state_accuracy_heldout']:.3f}")
     truth = read_trace(path, labels=True)  # the demo may compare with the truth
     k, ell = truth.spring_constant_n_per_m, float(np.mean(truth.gap_m))

@@ -162,8 +162,11 @@ class ForceIdentifier:
         First held-out sample.
     periodic_ : bool
     summary_ : dict
-        Interaction exponent, dissipated energy per cycle, peak repulsive force, contact time,
-        state accuracy (dimensionless and SI).
+        Interaction exponent with its 95 % profile-likelihood interval, dissipated energy per
+        cycle, peak repulsive force, contact time, state accuracy (dimensionless and SI).
+    exponent_profile_ : ndarray, shape (n_p, 2) or None
+        ``(p, RSS)``: the residual of the chosen support with its dominant ``delta^p`` set to
+        ``p`` (``a0`` and coefficients re-fitted); None without a contact term.
     warnings_ : list of str
     """
 
@@ -706,6 +709,32 @@ class ForceIdentifier:
         return cv_errors(self._template(), des.theta, des.y, self._bound.blocks, supp,
                          prior=self._prior_gram(des))
 
+    def _exponent_profile(self, model: IdentifiedModel,
+                          summary: dict[str, Any]) -> FloatArray | None:
+        """Profile residual of the interaction exponent, shape (n_p, 2): ``(p, min RSS)``.
+
+        The dominant ``delta^p`` of the chosen support is swept over ``p`` in 0.5 ... 4 with
+        the other terms kept; ``a0`` and all coefficients are re-fitted at every ``p`` (``a0``
+        on a grid over its range), so the profile follows the (a0, exponent, stiffness)
+        valley. None when the model has no contact term.
+        """
+        expo = summary.get("interaction_exponent")
+        lib = self._lib_final
+        js = [j for j, t in enumerate(lib.terms)
+              if isinstance(t, Indentation) and expo is not None and t.p == expo]
+        if not js:
+            return None
+        j = js[0]
+        lo, hi = self._a0_range
+        a0s = np.unique(np.concatenate([np.geomspace(lo, hi, 10), [model.a0]]))
+        ps = np.unique(np.concatenate([np.arange(0.5, 4.001, 0.25), [expo]]))
+        self._n_rows = int(self._design(lib, model.a0).y.size)
+        out = []
+        for p in ps:
+            lp = lib.replace(j, Indentation(float(p)))
+            out.append((float(p), min(self._support_rss(lp, a) for a in a0s)))
+        return np.array(out)
+
     def _refine(self, lib: AFMLibrary, a0: float) -> tuple[AFMLibrary, float]:
         """Nelder--Mead on (a0, exponents, decay lengths) of a fixed support."""
         params: list[tuple[int, str, float]] = [(-1, "a0", a0)]
@@ -904,6 +933,10 @@ class ForceIdentifier:
         self.force_lo_, self.force_hi_ = lo, hi
         self.summary_ = summarize(model, z=z, zdot=zd, force=force, cal=cal,
                                   state_error=self._state_error(model))
+        self.exponent_profile_ = self._exponent_profile(model, self.summary_)
+        if self.exponent_profile_ is not None:
+            self.summary_["interaction_exponent_interval"] = _profile_interval(
+                self.exponent_profile_, self._n_rows)
         if true_force is not None:
             self.summary_["force_nrmse_vs_truth"] = float(nrmse(force, true_force))
 
@@ -955,6 +988,24 @@ def _knee_on_front(cands: list[Candidate], objectives: tuple[str, ...]) -> int:
 
     ok = [i for i in front if within(i)]
     return min(ok, key=lambda i: (cands[i].n_terms, cands[i].cv_error))
+
+
+def _profile_interval(profile: FloatArray, n_rows: int,
+                      level: float = 3.841) -> tuple[float, float]:
+    """Profile-likelihood interval of a parameter from its residual profile.
+
+    ``profile`` shape (n, 2): ``(value, RSS)``. With Gaussian rows the likelihood-ratio
+    statistic is ``n_rows log(RSS / RSS_min)``; values with it below ``level`` (3.841: 95 %
+    for one parameter, chi-square) form the interval (its ends are the extreme grid values
+    inside, so an interval reaching the grid's ends means "not bounded by the data").
+    """
+    v, r = profile[:, 0], profile[:, 1]
+    ok = np.isfinite(r)
+    if not ok.any():
+        return (math.nan, math.nan)
+    lr = n_rows * np.log(r[ok] / r[ok].min())
+    inside = v[ok][lr <= level]
+    return (float(inside.min()), float(inside.max()))
 
 
 def _merge(*groups: list[Candidate]) -> list[Candidate]:

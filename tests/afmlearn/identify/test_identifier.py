@@ -186,3 +186,31 @@ def test_bad_data_raise(lj_trace):
         ForceIdentifier().fit(np.zeros(100))
     with pytest.raises(ValueError, match="true_force"):
         ForceIdentifier(**FAST).fit(lj_trace, true_force=np.zeros(3))
+
+
+def test_exponent_interval_covers_the_true_exponent(dmt_fit):
+    """The 95 % profile interval of the contact exponent contains the simulated 1.5.
+
+    At 1 % noise the exponent trades against ``a0`` and the stiffness, so the interval is
+    wide; what must hold is that it is honest (covers the truth) and contains the estimate.
+    """
+    tr, ide = dmt_fit
+    p_true = tr.labels.model["force"]["parameters"]["exponent"]
+    lo, hi = ide.summary_["interaction_exponent_interval"]
+    assert lo <= p_true <= hi
+    assert lo <= ide.summary_["interaction_exponent"] <= hi
+    prof = ide.exponent_profile_
+    assert prof.shape[1] == 2 and np.all(np.isfinite(prof[:, 1]))
+    assert np.all(prof[:, 1] >= prof[:, 1].min())
+
+
+def test_profile_interval_of_a_parabola():
+    """RSS = n0 (1 + (p - 2)^2 / n0 s^2): the 95 % interval is 2 +- 1.96 s (Wilks)."""
+    from afmlearn.identify.identifier import _profile_interval
+
+    n, s = 10_000, 0.2
+    p = np.linspace(0.5, 3.5, 3001)
+    rss = 1.0 + (p - 2.0) ** 2 / (n * s**2)  # n log(RSS/RSS_min) ~ ((p - 2) / s)^2
+    lo, hi = _profile_interval(np.column_stack([p, rss]), n)
+    assert lo == pytest.approx(2 - 1.96 * s, abs=2e-3)
+    assert hi == pytest.approx(2 + 1.96 * s, abs=2e-3)
