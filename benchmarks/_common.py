@@ -7,6 +7,7 @@ Every benchmark prints a markdown section and writes it into ``docs/benchmarks.m
 from __future__ import annotations
 
 import datetime as _dt
+import fcntl
 import hashlib
 import os
 import platform
@@ -155,9 +156,16 @@ def write_section(name: str, title: str, body: str, info: dict[str, str],
     if not write:
         return text
     DOC.parent.mkdir(parents=True, exist_ok=True)
-    old = DOC.read_text() if DOC.exists() else _HEADER
     pat = re.compile(rf"<!-- BEGIN {re.escape(name)} -->.*?<!-- END {re.escape(name)} -->",
                      re.S)
-    new = pat.sub(lambda _m: text, old) if pat.search(old) else old.rstrip() + "\n\n" + text + "\n"
-    DOC.write_text(new)
+    # benchmarks may finish concurrently: read-modify-write under a lock, then an atomic
+    # rename, so no section is lost and a reader never sees a half-written file
+    with open(DOC.with_suffix(".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        old = DOC.read_text() if DOC.exists() else _HEADER
+        new = (pat.sub(lambda _m: text, old) if pat.search(old)
+               else old.rstrip() + "\n\n" + text + "\n")
+        tmp = DOC.with_suffix(".md.tmp")
+        tmp.write_text(new)
+        os.replace(tmp, DOC)
     return text

@@ -6,8 +6,9 @@ period of ``P`` samples (default 64, the data module's ``samples_per_period``) w
 
 - Training throughput: samples/s of one step forward + backward + Adam on a batch of 64.
 - Inference latency: wall time of one period, batch 1, ``eval()`` + ``torch.inference_mode``.
-- The scan alone (fo-pooling, batch 64, one period): forward + backward for each chunk length
-  vs the readable reference loop, to choose the default chunk.
+- The scan alone (fo-pooling, one period): forward + backward at batch 64, forward at batch 1,
+  for the default choice, recursive doubling and each chunk length vs the readable reference
+  loop, to choose the default (`LOOP_ABOVE`).
 
 torch runs with 2 intra-op threads. Models are timed in interleaved rounds and the best round
 is kept, so a load spike from other processes hits all models alike and is mostly filtered out.
@@ -26,11 +27,11 @@ import torch
 
 from afmlearn.qrnn.layer import FOPooling, FPooling
 from afmlearn.qrnn.networks import AbstractSequenceNet, GRUNet, LSTMNet, QRNNNet
-from afmlearn.qrnn.scan import ChunkedScan, fo_pool, fo_pool_reference
+from afmlearn.qrnn.scan import ChunkedScan, DoublingScan, fo_pool, fo_pool_reference, prefix_scan
 
 BATCH = 64
 N_FEATURES = 2
-AUTO = "QRNN (default: auto chunk)"
+AUTO = "QRNN (default: loop or doubling)"
 
 
 def _best_interleaved(fns: dict[str, Callable[[], object]], *, rounds: int,
@@ -53,8 +54,10 @@ def _models(hidden: int, chunks: list[int]) -> dict[str, AbstractSequenceNet]:
         "GRU": GRUNet(N_FEATURES, hidden, num_layers=2),
     }
     out[AUTO] = QRNNNet(N_FEATURES, hidden, num_layers=2, window=2)
-    out["QRNN f-pooling (auto chunk)"] = QRNNNet(N_FEATURES, hidden, num_layers=2, window=2,
-                                                 pooling=FPooling())
+    out["QRNN f-pooling (default scan)"] = QRNNNet(N_FEATURES, hidden, num_layers=2, window=2,
+                                                   pooling=FPooling())
+    out["QRNN doubling"] = QRNNNet(N_FEATURES, hidden, num_layers=2, window=2,
+                                   pooling=FOPooling(scan=DoublingScan()))
     for ch in chunks:
         out[f"QRNN chunk {ch}"] = QRNNNet(N_FEATURES, hidden, num_layers=2, window=2,
                                           pooling=FOPooling(scan=ChunkedScan(chunk=ch)))
@@ -120,12 +123,13 @@ def bench_scan(hidden: int, period: int, chunks: list[int], *, rounds: int) -> l
             run()
             return run
 
-        fns = {"loop": make(fo_pool_reference), "auto": make(fo_pool)}
+        fns = {"loop": make(fo_pool_reference), "auto": make(fo_pool),
+               "doubling": make(lambda a, b: prefix_scan(a, (1.0 - a) * b))}
         for ch in chunks:
             fns[str(ch)] = make(lambda a, b, ch=ch: fo_pool(a, b, chunk=ch))
         t = _best_interleaved(fns, rounds=rounds, inner=3)
         rows.append([hidden, batch, "fwd + bwd" if grad else "fwd"]
-                    + [C.fmt(1e3 * t[k]) for k in ("loop", "auto", *map(str, chunks))])
+                    + [C.fmt(1e3 * t[k]) for k in ("loop", "auto", "doubling", *map(str, chunks))])
     return rows
 
 
@@ -155,7 +159,8 @@ def main(argv: list[str] | None = None) -> str:
          "inference ms/period"],
         [[r["hidden"], r["model"], C.fmt(BATCH / r["train_s"]), C.fmt(1e3 * r["train_s"]),
           C.fmt(r["ratio"]), C.fmt(1e3 * r["infer_s"])] for r in rows])
-    scan_table = C.md_table(["hidden", "batch", "pass", "reference loop ms", "auto ms"]
+    scan_table = C.md_table(["hidden", "batch", "pass", "reference loop ms", "auto ms",
+                             "doubling ms"]
                             + [f"chunk {c} ms" for c in chunks], scan_rows)
     verdict = []
     for hidden in hiddens:
@@ -168,8 +173,8 @@ def main(argv: list[str] | None = None) -> str:
     body = f"""Two-layer networks of equal hidden size, batch {BATCH}, one period of
 P = {args.period} samples with {N_FEATURES} input features, forward + backward + Adam per
 training step; inference is batch 1, one period. QRNN: window 2, fo-pooling; its scan
-(`afmlearn/qrnn/scan.py`) by default picks the chunk per call (`auto_chunk`: plain time-major
-loop for wide steps, batch x hidden >= 4096, else chunks of ~sqrt(P)). Best of {rounds}
+(`afmlearn/qrnn/scan.py`) by default picks per call: the plain time-major loop for wide steps
+(batch x hidden >= 4096), else recursive doubling (log2 P whole-sequence steps). Best of {rounds}
 interleaved rounds.
 
 Arithmetic bound: per sample and time step a 2-layer LSTM multiplies about 12 H^2 (4H x H

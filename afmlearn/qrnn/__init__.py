@@ -61,11 +61,13 @@ from afmlearn.qrnn.networks import AbstractSequenceNet, GRUNet, LSTMNet, QRNNNet
 from afmlearn.qrnn.scan import (
     AbstractScan,
     ChunkedScan,
+    DoublingScan,
     ReferenceScan,
     fo_pool,
     fo_pool_reference,
     linear_scan,
     linear_scan_reference,
+    prefix_scan,
 )
 from afmlearn.qrnn.train import export_checkpoint, train
 
@@ -81,6 +83,7 @@ __all__ = [
     "CouplingFlag",
     "DatasetSpec",
     "DirectForecast",
+    "DoublingScan",
     "FOPooling",
     "FPooling",
     "GRUNet",
@@ -109,6 +112,7 @@ __all__ = [
     "load_module",
     "point_activations",
     "predict_trace",
+    "prefix_scan",
     "rank_units",
     "roc_auc",
     "sweet_spot_interval",

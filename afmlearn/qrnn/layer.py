@@ -6,9 +6,10 @@ recurrence ("pooling"), physics.md section 6. With window ``k`` and input ``x_t`
     Z = tanh(W_z * X),  F = sigmoid(W_f * X),  O = sigmoid(W_o * X),  I = sigmoid(W_i * X),
 
 where ``W * X`` at time ``t`` sees only ``x_{t-k+1} .. x_t`` (zeros, or the carried inputs of a
-stream, before the start). The convolution is computed as one batched matrix product on the
-``k`` time-shifted copies of ``x`` concatenated along features (identical to a left-padded
-``conv1d``), in time-major storage: outputs are ``(batch, time, hidden)`` views of it.
+stream, before the start). The convolution is computed as one matrix product of the ``k``
+time-shifted copies of ``x`` concatenated along features (identical to a left-padded
+``conv1d``) with all gates' weights side by side, in time-major storage: the gates are
+``(batch, time, hidden)`` views of it.
 Pooling strategies (objects, see `AbstractPooling`):
 
 - `FPooling`:   ``c_t = f_t * c_{t-1} + (1 - f_t) * z_t``,  ``h_t = c_t``;
@@ -232,19 +233,25 @@ class QRNNLayer(nn.Module):
         """
         self._check_x(x)
         n_batch, n_time = x.shape[:2]
+        n_gates, n_hidden = self.pooling.n_gates, self.hidden_size
         xp = self._padded(x, past)  # time-major
         shifted = torch.cat([xp[j:j + n_time] for j in range(self.window)], dim=-1)
-        shifted = shifted.reshape(1, n_time * n_batch, self.window * self.input_size)
-        # one batched matrix product, one contiguous time-major block per gate; the gates are
-        # handed on as (batch, time, hidden) views (element-wise ops and the scan keep it)
-        pre = torch.baddbmm(self.bias, shifted.expand(self.pooling.n_gates, -1, -1),
-                            self.weight)
+        # one matrix product (time * batch, window * input) x (window * input, gates * hidden):
+        # rows time-major, every row holds the gates z, f, o, i side by side; the gates are
+        # handed on as (batch, time, hidden) views of it (element-wise ops and the scan keep
+        # them). One GEMM, not a batched product of the input expanded per gate: its backward
+        # is one GEMM per operand too (no per-gate input gradients summed afterwards).
+        weight = self.weight.transpose(0, 1).reshape(self.window * self.input_size,
+                                                     n_gates * n_hidden)
+        pre = torch.addmm(self.bias.view(n_gates * n_hidden),
+                          shifted.view(n_time * n_batch, weight.shape[0]), weight)
         # split / unbind, not indexing: their backward concatenates the gate gradients
         # (indexing would zero-fill a full-size gradient per gate); one sigmoid for all gates
-        pre_z, pre_s = pre.view(self.pooling.n_gates, n_time, n_batch, self.hidden_size).split(
-            [1, self.pooling.n_gates - 1])
-        z = torch.tanh(pre_z[0]).transpose(0, 1)
-        sig = torch.sigmoid(pre_s).transpose(1, 2).unbind(0)
+        pre_z, pre_s = pre.view(n_time, n_batch, n_gates * n_hidden).split(
+            [n_hidden, (n_gates - 1) * n_hidden], dim=-1)
+        z = torch.tanh(pre_z).transpose(0, 1)
+        sig = torch.sigmoid(pre_s).view(n_time, n_batch, n_gates - 1, n_hidden).transpose(
+            0, 1).unbind(2)
         f = sig[0]
         if self.zoneout > 0.0:
             if self.training:

@@ -1,4 +1,4 @@
-"""The QRNN recurrence: a reference loop and a fast, numerically safe chunked scan.
+"""The QRNN recurrence: a reference loop and fast, numerically safe scans.
 
 Every QRNN pooling is the element-wise linear recurrence
 
@@ -13,28 +13,38 @@ Gate convention
 *remembers* and ``f`` near 0 overwrites. (The old CUDA implementation of Salesforce passes
 ``1 - f`` to its kernel; do not mix the two.)
 
-Fast scan
----------
-`linear_scan` never forms ratios or exponentials of cumulative products, so it is safe for any
-product of gates (values in ``[0, 1]`` only shrink, underflow to 0 is the right answer; a
-positive cumulative log-sum is never exponentiated). Time is cut into ``n`` chunks of length
-``L = chunk``:
+Fast scans
+----------
+None of them forms ratios, logarithms or exponentials of gates, so all are safe for any
+product of gates, including gates exactly 0 or 1: only products of values in ``[0, 1]`` (which
+only shrink; underflow to 0 is the right answer) and sums of ``b`` weighted by them occur, the
+same terms as in the loop, summed in another order. No clamp is needed and no error bound
+beyond rounding applies.
 
-1. inside every chunk, all chunks at once: the local scan from a zero state
-   (``L - 1`` vectorised steps) and the running product of ``a`` (`torch.cumprod`);
-2. the state entering each chunk: the same recurrence on the chunk ends (length ``n``, solved
-   by a recursive call, so very long sequences need ``O(log T)`` levels);
-3. ``c = local + cumprod(a) * c_entering`` (one vectorised step).
+- Plain loop (``chunk = 1``): ``T`` steps over one ``(batch, hidden)`` block each; fewest
+  passes over memory, so fastest when a step is wide (training batches).
+- Recursive doubling (`prefix_scan`, Hillis-Steele / Kogge-Stone): after the level with shift
+  ``d`` every ``c_t`` is the state started from zero ``2 d`` steps earlier and ``A_t`` the
+  product of those gates; a level is ``c_t += A_t c_{t-d}``, ``A_t *= A_{t-d}`` over the whole
+  sequence at once (two operations on zero / one padded buffers), ``ceil(log2 T)`` levels, ``c_0``
+  folded into ``b_1``. About ``2 log2 T`` tensor operations instead of ``T``: fastest when a
+  step is narrow and the per-operation cost dominates (inference on one trace).
+- Chunked (``chunk = L >= 2``): local scans of all chunks at once (``L - 1`` steps), the same
+  recurrence on the chunk ends (recursive), ``c = local + cumprod(a) * c_entering``.
 
-That is about ``L + T / L`` Python-level steps instead of ``T``, at the price of a few more
-passes over memory; so on a CPU it pays when a time step is narrow (``batch * hidden`` small,
-e.g. inference on one trace), while for wide steps (training batches) the plain time-major
-loop is faster. ``chunk=None`` picks between them (`auto_chunk`, measured by
-``benchmarks/bench_qrnn_speed.py``). Gradients are not taken through these
-steps: a custom `torch.autograd.Function` runs the adjoint recurrence (the same scan backwards
-in time), ``d_t = g_t + a_{t+1} d_{t+1}``, ``dL/db_t = d_t``, ``dL/da_t = d_t c_{t-1}``,
+``chunk=None`` (default) picks per call: the loop when ``batch * hidden >= LOOP_ABOVE``, else
+doubling (measured by ``benchmarks/bench_qrnn_speed.py``). A closed form inside chunks,
+``c_t = sum_{s<=t} exp(S_t - S_s) b_s`` with ``S = cumsum(log a)`` (one (L x L) weight matrix per
+chunk and element), was measured too and rejected: on this CPU it was 2-5x slower than
+doubling at batch 1 and 5-50x slower than the loop at batch 64 (``T * L`` exponentials per
+element instead of ``2 log2 T`` multiply-adds), and it needs ``a`` clamped away from 0.
+
+Gradients are not taken through these steps: a custom `torch.autograd.Function` runs the
+adjoint recurrence (the same scan backwards in time, by the same method),
+``d_t = g_t + a_{t+1} d_{t+1}``, ``dL/db_t = d_t``, ``dL/da_t = d_t c_{t-1}``,
 ``dL/dc_0 = a_1 d_1``, so backward costs about one more scan and stores only ``c`` (the
-backward is itself differentiable: double backward works).
+backward is itself differentiable: double backward works). Without gradients (``eval()``
+under `torch.inference_mode`) the kernel is called directly, without autograd bookkeeping.
 
 Internally the scan runs time-major (every step touches one contiguous ``(batch, hidden)``
 block); the result is returned as a ``(batch, time, hidden)`` view of time-major storage, so
@@ -55,23 +65,28 @@ from torch import Tensor
 __all__ = [
     "AbstractScan",
     "ChunkedScan",
+    "DoublingScan",
+    "LOOP_ABOVE",
     "ReferenceScan",
     "auto_chunk",
     "fo_pool",
     "fo_pool_reference",
     "linear_scan",
     "linear_scan_reference",
+    "prefix_scan",
 ]
 
 #: below this many elements per time step (batch * hidden) the per-step Python/dispatch cost
-#: dominates and the chunked scan wins; above it the plain time-major loop (``chunk = 1``) does
-#: fewer passes over memory and is faster (measured on the 2-core CPU, see
+#: dominates and recursive doubling wins; above it the plain time-major loop (``chunk = 1``)
+#: does fewer passes over memory and is faster (measured on the 2-core CPU, see
 #: docs/benchmarks.md, section qrnn_speed)
 LOOP_ABOVE = 4096
 
 
 def auto_chunk(n_time: int, n_elements: int) -> int:
-    """Chunk length chosen by ``chunk=None``: 1 (plain loop) for wide steps, else ~sqrt(T).
+    """A chunk length for the chunked scan: 1 (plain loop) for wide steps, else ~sqrt(T).
+
+    (``chunk=None`` no longer uses it: narrow steps go to recursive doubling.)
 
     Parameters
     ----------
@@ -168,9 +183,42 @@ def _adjoint_loop(a: Tensor, g: Tensor) -> Tensor:
     return d
 
 
-def _kernel(a: Tensor, b: Tensor, c0: Tensor, chunk: int) -> Tensor:
-    """Chunked kernel (no autograd), time-major (time, batch, hidden): see module docstring."""
+def _doubling(a: Tensor, b: Tensor, c0: Tensor) -> Tensor:
+    """Doubling (Hillis-Steele) kernel (no autograd), time-major (time, batch, hidden).
+
+    After the level with shift ``d``, ``c[t]`` holds the state at ``t`` started from zero
+    ``2 d`` steps earlier and ``A[t]`` the product of those ``2 d`` gates; levels
+    ``d = 1, 2, 4, ...`` until ``d >= T``. Both buffers are preceded by ``pad`` rows of zeros
+    (``c``) and ones (``A``), so a level is two whole-array operations, with no special case
+    for ``t < d``; the two buffer pairs alternate (a level may not overwrite what it reads).
+    """
     n_time = a.shape[0]
+    if n_time <= 2:
+        return _loop(a, b, c0)
+    pad = 1 << ((n_time - 1).bit_length() - 1)  # the largest shift d < T
+    spec = (0, 0) * (a.dim() - 1) + (pad, 0)
+    c = torch.nn.functional.pad(b, spec)
+    c[pad].addcmul_(a[0], c0)  # fold c0 into b_1: c_1 = a_1 c0 + b_1
+    c_next = torch.zeros_like(c)
+    prod = torch.nn.functional.pad(a, spec, value=1.0)
+    prod_next = torch.ones_like(prod)
+    d = 1
+    while d < n_time:
+        torch.addcmul(c[pad:], prod[pad:], c[pad - d:pad - d + n_time], out=c_next[pad:])
+        c, c_next = c_next, c
+        if 2 * d < n_time:  # the last level's products are not needed
+            torch.mul(prod[pad:], prod[pad - d:pad - d + n_time], out=prod_next[pad:])
+            prod, prod_next = prod_next, prod
+        d *= 2
+    return c[pad:]
+
+
+def _kernel(a: Tensor, b: Tensor, c0: Tensor, chunk: int) -> Tensor:
+    """Kernel (no autograd), time-major (time, batch, hidden): ``chunk = 0`` doubling, else
+    chunked (``1``: plain loop); see module docstring."""
+    n_time = a.shape[0]
+    if chunk == 0:
+        return _doubling(a, b, c0)
     if n_time <= chunk or chunk < 2:
         return _loop(a, b, c0)
     n = -(-n_time // chunk)
@@ -191,8 +239,13 @@ def _kernel(a: Tensor, b: Tensor, c0: Tensor, chunk: int) -> Tensor:
 
 
 def _time_major(x: Tensor) -> Tensor:
-    """(batch, time, hidden) -> contiguous (time, batch, hidden); free for time-major storage."""
-    return x.transpose(0, 1).contiguous()
+    """(batch, time, hidden) -> (time, batch, hidden) with unit stride along hidden.
+
+    Free for time-major storage, also when the rows hold other data too (the gates of
+    `afmlearn.qrnn.layer` are column blocks of one matrix); otherwise a copy.
+    """
+    t = x.transpose(0, 1)
+    return t if t.stride(-1) == 1 else t.contiguous()
 
 
 class _LinearScan(torch.autograd.Function):
@@ -200,7 +253,7 @@ class _LinearScan(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, a: Tensor, b: Tensor, c0: Tensor, chunk: int) -> Tensor:
-        c = _kernel(a.contiguous(), b.contiguous(), c0.contiguous(), chunk)
+        c = _kernel(a, b, c0.contiguous(), chunk)
         ctx.save_for_backward(a, c, c0)
         ctx.chunk = chunk
         return c
@@ -209,7 +262,7 @@ class _LinearScan(torch.autograd.Function):
     def backward(ctx, g: Tensor):
         a, c, c0 = ctx.saved_tensors
         grad_a = grad_c0 = None
-        if torch.is_grad_enabled() or (a.shape[0] > ctx.chunk > 1):
+        if torch.is_grad_enabled() or ctx.chunk == 0 or a.shape[0] > ctx.chunk > 1:
             # adjoint d_t = g_t + a_{t+1} d_{t+1}: the same scan on the time-reversed sequence
             # (through `apply` again, so that double backward works too)
             a_next = torch.cat([a[1:], a.new_zeros(1, *a.shape[1:])])
@@ -236,7 +289,7 @@ def _check_chunk(chunk: int) -> int:
 
 def linear_scan(a: Tensor, b: Tensor, c0: Tensor | None = None, *,
                 chunk: int | None = None) -> Tensor:
-    """Fast chunked solution of ``c_t = a_t * c_{t-1} + b_t`` (differentiable).
+    """Fast solution of ``c_t = a_t * c_{t-1} + b_t`` (differentiable).
 
     Parameters
     ----------
@@ -247,8 +300,10 @@ def linear_scan(a: Tensor, b: Tensor, c0: Tensor | None = None, *,
     c0 : Tensor, shape (batch, hidden), optional
         State before the first step; zeros when None.
     chunk : int, optional
-        Chunk length ``L >= 1`` (``1`` or ``L >= time``: plain sequential loop); None chooses
-        with `auto_chunk`. Results do not depend on it beyond rounding; speed does.
+        Chunk length ``L >= 1`` (``1`` or ``L >= time``: plain sequential loop); None (default)
+        chooses per call: the plain loop for wide steps (``batch * hidden >= LOOP_ABOVE``),
+        else recursive doubling (`prefix_scan`). Results do not depend on it beyond
+        rounding; speed does.
 
     Returns
     -------
@@ -257,14 +312,45 @@ def linear_scan(a: Tensor, b: Tensor, c0: Tensor | None = None, *,
     """
     c0 = _check(a, b, c0)
     if chunk is None:
-        chunk = auto_chunk(a.shape[1], a.shape[0] * a.shape[2])
-    _check_chunk(chunk)
+        chunk = 1 if a.shape[0] * a.shape[2] >= LOOP_ABOVE else 0
+    else:
+        _check_chunk(chunk)
+    return _run(a, b, c0, chunk)
+
+
+def _run(a: Tensor, b: Tensor, c0: Tensor, chunk: int) -> Tensor:
+    """Dispatch to the kernel (``chunk = 0``: doubling), through autograd only if needed."""
     if a.shape[1] == 0:
         return b.clone()
     if a.dtype != b.dtype or c0.dtype != b.dtype:
         raise ValueError(f"a, b and c0 must share one dtype; got {a.dtype}, {b.dtype}, "
                          f"{c0.dtype}")
-    return _LinearScan.apply(_time_major(a), _time_major(b), c0, chunk).transpose(0, 1)
+    if torch.is_grad_enabled() and (a.requires_grad or b.requires_grad or c0.requires_grad):
+        return _LinearScan.apply(_time_major(a), _time_major(b), c0, chunk).transpose(0, 1)
+    return _kernel(_time_major(a), _time_major(b), c0.contiguous(), chunk).transpose(0, 1)
+
+
+def prefix_scan(a: Tensor, b: Tensor, c0: Tensor | None = None) -> Tensor:
+    """Solution of ``c_t = a_t * c_{t-1} + b_t`` by recursive doubling (differentiable).
+
+    ``ceil(log2 T)`` whole-sequence steps (see module docstring); fastest when a time step is
+    narrow (``batch * hidden`` small, e.g. inference on one trace).
+
+    Parameters
+    ----------
+    a : Tensor, shape (batch, time, hidden)
+        Multiplier of the previous state, values in [0, 1] (the forget gate ``f``).
+    b : Tensor, shape (batch, time, hidden)
+        Input term.
+    c0 : Tensor, shape (batch, hidden), optional
+        State before the first step; zeros when None.
+
+    Returns
+    -------
+    c : Tensor, shape (batch, time, hidden)
+        States ``c_1 .. c_T``; equal to `linear_scan_reference` up to rounding.
+    """
+    return _run(a, b, _check(a, b, c0), 0)
 
 
 def fo_pool(f: Tensor, z: Tensor, c0: Tensor | None = None, *,
@@ -280,7 +366,7 @@ def fo_pool(f: Tensor, z: Tensor, c0: Tensor | None = None, *,
     c0 : Tensor, shape (batch, hidden), optional
         Initial cell state; zeros when None.
     chunk : int, optional
-        Chunk length of the scan, see `linear_scan` (None: `auto_chunk`).
+        Chunk length of the scan, see `linear_scan` (None: loop or doubling, per call).
 
     Returns
     -------
@@ -307,7 +393,8 @@ class ChunkedScan(AbstractScan):
     Parameters
     ----------
     chunk : int, optional
-        Chunk length ``>= 1``; None (default) chooses per call with `auto_chunk`.
+        Chunk length ``>= 1``; None (default) chooses per call between the plain loop and
+        recursive doubling (see `linear_scan`).
     """
 
     def __init__(self, *, chunk: int | None = None) -> None:
@@ -318,6 +405,17 @@ class ChunkedScan(AbstractScan):
 
     def __repr__(self) -> str:
         return f"ChunkedScan(chunk={self.chunk})"
+
+
+@typing.final
+class DoublingScan(AbstractScan):
+    """Recursive doubling `prefix_scan`, whatever the width of a step."""
+
+    def __call__(self, a: Tensor, b: Tensor, c0: Tensor | None = None) -> Tensor:
+        return prefix_scan(a, b, c0)
+
+    def __repr__(self) -> str:
+        return "DoublingScan()"
 
 
 @typing.final

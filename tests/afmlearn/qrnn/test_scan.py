@@ -6,13 +6,16 @@ import pytest
 import torch
 
 from afmlearn.qrnn.scan import (
+    LOOP_ABOVE,
     ChunkedScan,
+    DoublingScan,
     ReferenceScan,
     auto_chunk,
     fo_pool,
     fo_pool_reference,
     linear_scan,
     linear_scan_reference,
+    prefix_scan,
 )
 
 D = torch.float64
@@ -166,3 +169,109 @@ def test_bad_shapes() -> None:
         fo_pool(f, z, c0[:, :2])
     with pytest.raises(ValueError, match="same shape"):
         fo_pool(f[0], z[0])
+
+
+# --- recursive doubling (`prefix_scan`, `DoublingScan`, the default for narrow steps) ---
+
+
+def _grads(fn, a, b, c0, w):
+    ar, br, cr = (v.clone().requires_grad_(True) for v in (a, b, c0))
+    c = fn(ar, br, cr)
+    (c * w).sum().backward()
+    return c.detach(), ar.grad, br.grad, cr.grad
+
+
+@pytest.mark.parametrize("n_time", [1, 2, 3, 4, 5, 7, 8, 9, 63, 64, 65, 300])
+def test_doubling_forward_backward_match_loop(n_time: int) -> None:
+    """T not a power of two, c0 given or not, general b; forward and all gradients."""
+    f, z, c0 = _inputs(3, n_time, 5, seed=n_time)
+    b = 2.0 * z
+    w = torch.randn(3, n_time, 5, dtype=D, generator=torch.Generator().manual_seed(2))
+    got = _grads(prefix_scan, f, b, c0, w)
+    ref = _grads(linear_scan_reference, f, b, c0, w)
+    for g, r in zip(got, ref, strict=True):
+        torch.testing.assert_close(g, r, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(prefix_scan(f, b), linear_scan_reference(f, b),
+                               rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize(("lo", "hi"), [(0.0, 1e-6), (1.0 - 1e-6, 1.0), (0.999, 1.0),
+                                        (0.0, 1.0)])
+def test_doubling_extreme_gates_long(lo: float, hi: float) -> None:
+    """Long products of gates near 0 and near 1 (3000 steps): finite, equal to the loop."""
+    f, z, c0 = _inputs(2, 3000, 3, seed=8, lo=lo, hi=hi)
+    b = (1 - f) * z
+    w = torch.randn(2, 3000, 3, dtype=D, generator=torch.Generator().manual_seed(3))
+    got = _grads(prefix_scan, f, b, c0, w)
+    ref = _grads(linear_scan_reference, f, b, c0, w)
+    for g, r in zip(got, ref, strict=True):
+        assert torch.isfinite(g).all()
+        torch.testing.assert_close(g, r, rtol=1e-10, atol=1e-10)
+
+
+def test_doubling_gates_exactly_zero_and_one() -> None:
+    """Gates exactly 0 and 1 (mixed): no NaN from 0 * inf or log 0, equal to the loop."""
+    f, z, c0 = _inputs(2, 37, 4, seed=4)
+    g = torch.Generator().manual_seed(5)
+    pick = torch.randint(0, 3, f.shape, generator=g)
+    f = torch.where(pick == 0, 0.0, torch.where(pick == 1, 1.0, f))
+    w = torch.randn(f.shape, dtype=D, generator=g)
+    got = _grads(prefix_scan, f, z, c0, w)
+    ref = _grads(linear_scan_reference, f, z, c0, w)
+    for a, r in zip(got, ref, strict=True):
+        assert torch.isfinite(a).all()
+        torch.testing.assert_close(a, r, rtol=1e-13, atol=1e-13)
+    ones = torch.ones_like(f)
+    torch.testing.assert_close(prefix_scan(ones, torch.zeros_like(z), c0),
+                               c0[:, None].expand_as(z))
+    torch.testing.assert_close(prefix_scan(torch.zeros_like(f), z, c0), z)
+
+
+def test_doubling_underflow_stays_finite() -> None:
+    f = torch.full((1, 10_000, 2), 1e-3, dtype=D, requires_grad=True)
+    z = torch.ones(1, 10_000, 2, dtype=D, requires_grad=True)
+    c0 = torch.full((1, 2), 5.0, dtype=D)
+    c = prefix_scan(f, (1 - f) * z, c0)
+    c.sum().backward()
+    assert torch.isfinite(c).all() and torch.isfinite(f.grad).all()
+    torch.testing.assert_close(c, fo_pool_reference(f, z, c0))
+
+
+@pytest.mark.parametrize("n_time", [1, 5, 8, 11])
+def test_doubling_gradcheck_and_gradgradcheck(n_time: int) -> None:
+    f, z, c0 = _inputs(2, n_time, 3, seed=20 + n_time)
+    args = tuple(v.requires_grad_(True) for v in (f, z, c0))
+    assert torch.autograd.gradcheck(prefix_scan, args)
+    assert torch.autograd.gradgradcheck(prefix_scan, args)
+
+
+def test_doubling_float32_close_to_float64_loop() -> None:
+    f, z, c0 = _inputs(4, 4096, 8, seed=12, lo=0.9, hi=1.0)
+    ref = fo_pool_reference(f, z, c0)
+    got = prefix_scan(f.float(), ((1 - f) * z).float(), c0.float()).double()
+    torch.testing.assert_close(got, ref, rtol=0, atol=2e-5)
+
+
+def test_default_picks_doubling_for_narrow_steps_and_loop_for_wide() -> None:
+    """chunk=None: both regimes equal to the loop, forward and backward, and without grad."""
+    for shape in [(1, 64, 16), (2, 300, 8), (64, 70, LOOP_ABOVE // 64)]:
+        f, z, c0 = _inputs(*shape, seed=13)
+        w = torch.randn(shape, dtype=D, generator=torch.Generator().manual_seed(4))
+        got = _grads(lambda a, b, c: linear_scan(a, b, c), f, z, c0, w)
+        ref = _grads(linear_scan_reference, f, z, c0, w)
+        for g, r in zip(got, ref, strict=True):
+            torch.testing.assert_close(g, r, rtol=1e-12, atol=1e-12)
+        with torch.inference_mode():
+            torch.testing.assert_close(linear_scan(f, z, c0), ref[0], rtol=1e-12, atol=1e-12)
+
+
+def test_doubling_strategy_and_noncontiguous_inputs() -> None:
+    f, z, c0 = _inputs(2, 40, 6, seed=6)
+    ref = ReferenceScan()(f, z, c0)
+    torch.testing.assert_close(DoublingScan()(f, z, c0), ref)
+    assert repr(DoublingScan()) == "DoublingScan()"
+    # gate blocks side by side in time-major rows (as the layer hands them on)
+    wide = torch.cat([f, z], dim=-1).transpose(0, 1).contiguous().transpose(0, 1)
+    fa, zb = wide.split([6, 6], dim=-1)
+    for scan in (DoublingScan(), ChunkedScan(chunk=1), ChunkedScan(chunk=4)):
+        torch.testing.assert_close(scan(fa, zb, c0), ref)
