@@ -653,13 +653,9 @@ class ForceIdentifier:
 
     def _conservative_phases(self, fc: float) -> list[float]:
         """Drive phases of the two conservative roots of the fundamental's balance."""
-        d = self._den
-        tau = self._tau_fit
         om = self._cal.omega
-        m = int(np.floor((tau[-1] - tau[0]) * om / (2 * math.pi)) * 2 * math.pi / om
-                / max(tau[1] - tau[0], 1e-300))
-        m = max(min(m, tau.size), 2)
-        x1 = complex(2.0 * np.mean(d.x[:m] * np.exp(-1j * om * tau[:m])))
+        x1 = complex(fit_harmonics(self._tau_fit, self._den.x, om,
+                                   n_harmonics=1).complex_amplitudes[1])
         if abs(x1) == 0:
             return []
         dd = om / self._cal.quality_factor
@@ -728,7 +724,6 @@ class ForceIdentifier:
         lo, hi = self._a0_range
         a0s = np.unique(np.concatenate([np.geomspace(lo, hi, 10), [model.a0]]))
         ps = np.unique(np.concatenate([np.arange(0.5, 4.001, 0.25), [expo]]))
-        self._n_rows = int(self._design(lib, model.a0).y.size)
         out = []
         for p in ps:
             lp = lib.replace(j, Indentation(float(p)))
@@ -935,8 +930,9 @@ class ForceIdentifier:
                                   state_error=self._state_error(model))
         self.exponent_profile_ = self._exponent_profile(model, self.summary_)
         if self.exponent_profile_ is not None:
+            n_rows = self._design(self._lib_final, model.a0).y.size
             self.summary_["interaction_exponent_interval"] = _profile_interval(
-                self.exponent_profile_, self._n_rows)
+                self.exponent_profile_, n_rows)
         if true_force is not None:
             self.summary_["force_nrmse_vs_truth"] = float(nrmse(force, true_force))
 
