@@ -1,0 +1,330 @@
+"""Harmonic balance on the measured periodic orbit, whitened by the linearised dynamics.
+
+For a steady orbit ``x(tau)`` with harmonics ``X_n`` (``x = Re sum_n X_n e^{i n theta}``,
+``theta = Omega tau``) the equation of motion of a :class:`ModelSpec` becomes one complex row
+per harmonic ``n = 0 .. n_h``::
+
+    e_n = (K - n^2 Omega^2 + i n Omega D) X_n / G_n + F_n - B e^{-i phi} [n = 1]
+
+with ``F_n`` the harmonics of the force columns evaluated on the measured (denoised) orbit and
+``G_n = 1 + g2 L1_n H2_n`` the second mode's share of the lever's response (``G = 1`` for one
+mode). The rows are linear in ``(K, D, B, c_j)``; the other parameters (``a0``, ``phi``,
+exponents, decay lengths, mode 2, detector) are nonlinear and searched outside.
+
+Noise model (what makes the residual a chi-square). The measured orbit's harmonics carry white
+noise of standard deviation ``sigma sqrt(2 / N)`` (``sigma`` the sample noise, ``N`` the fitted
+samples). A perturbation ``dX`` of the orbit changes the rows by ``J dX``, where ``J`` is the
+Hill operator of the equation linearised about the orbit (lever plus ``dF/dx`` and
+``dF/dx'`` of a reference fit). The whitened residual ``w = diag(1/sigma_X) J^-1 e`` is
+therefore the orbit correction the model needs, in units of the orbit's own noise: for the
+true model ``||w||^2`` is chi-square with (rows - parameters) degrees of freedom, and the
+difference between two nested models is a likelihood-ratio statistic. Calibration priors
+(``K = 1``, ``D = 1/Q``, ``B = F_c``; physics.md section 5) enter as extra rows in the same
+units, with boxes of +-15 %.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import final
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import lsq_linear
+
+from afmlearn.preprocess import HarmonicFit
+
+from .spec import ModelSpec, neck_state
+
+__all__ = ["PeriodicOrbit", "HarmonicBalance", "Solution", "N_LEVER", "harmonics", "to_real",
+           "from_real", "synthesize", "invert_detector"]
+
+FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
+
+#: linear lever/drive unknowns that precede the force coefficients: K, D, B
+N_LEVER = 3
+
+
+def harmonics(u: FloatArray, n_h: int) -> ComplexArray:
+    """``U_n`` (n = 0..n_h) of a grid function over one period: ``u = Re sum U_n e^{i n theta}``.
+
+    ``u`` shape (..., M) on ``theta_k = 2 pi k / M``; returns shape (..., n_h + 1).
+    """
+    m = u.shape[-1]
+    f = np.fft.rfft(u, axis=-1)[..., : n_h + 1] / m
+    f[..., 1:] *= 2.0
+    return f
+
+
+def synthesize(U: ComplexArray, m: int, derivative: int = 0, omega: float = 1.0) -> FloatArray:
+    """Grid values (M points) of ``Re sum U_n (i n Omega)^d e^{i n theta}``."""
+    n = np.arange(U.shape[-1])
+    spec = U * (1j * n * omega) ** derivative
+    full = np.zeros(m // 2 + 1, complex)
+    full[: spec.size] = spec
+    full[1:] /= 2.0
+    return np.fft.irfft(full * m, n=m)
+
+
+def to_real(E: ComplexArray) -> FloatArray:
+    """Real rows ``[Re E_0, Re E_1..n, -Im E_1..n]`` (the HarmonicFit coefficient layout)."""
+    return np.concatenate([E[..., :1].real, E[..., 1:].real, -E[..., 1:].imag], axis=-1)
+
+
+def from_real(r: FloatArray) -> ComplexArray:
+    """Inverse of :func:`to_real`."""
+    n = (r.shape[-1] - 1) // 2
+    out = np.empty(r.shape[:-1] + (n + 1,), complex)
+    out[..., 0] = r[..., 0]
+    out[..., 1:] = r[..., 1 : n + 1] - 1j * r[..., n + 1 :]
+    return out
+
+
+def invert_detector(y: FloatArray, b2: float, b3: float) -> FloatArray:
+    """True deflection ``x`` with ``y = x + b2 x^2 + b3 x^3`` (Newton from ``x = y``)."""
+    x = np.array(y, float)
+    for _ in range(30):
+        g = x + b2 * x**2 + b3 * x**3 - y
+        d = 1.0 + 2.0 * b2 * x + 3.0 * b3 * x**2
+        d = np.where(np.abs(d) < 0.2, np.sign(d) * 0.2 + (d == 0) * 0.2, d)
+        step = g / d
+        x -= step
+        if np.max(np.abs(step)) < 1e-13:
+            break
+    return x
+
+
+@final
+class PeriodicOrbit:
+    """The denoised measured orbit of the fit span on a phase grid of one drive period.
+
+    Parameters
+    ----------
+    fit : HarmonicFit
+        Fourier series of the measured deflection (``period_multiple`` 1) over the fit span.
+    gap : float
+        Rest gap / ``L_ref``.
+    quality_factor : float
+        Calibrated Q of the free fundamental.
+    drive_amplitude : float or None
+        ``F_c`` [k L_ref] from the free data (None: the drive amplitude is not constrained).
+    grid : int
+        Phase-grid points per period (power of two; resolves the contact).
+
+    Attributes
+    ----------
+    y, ydot : ndarray, shape (grid,)
+        Measured orbit and rate on ``theta_k = 2 pi k / grid`` (``tau = theta / Omega``).
+    Y : ndarray, shape (n_h + 1,), complex
+        Its harmonics.
+    sigma_rows : ndarray, shape (2 n_h + 1,)
+        Noise standard deviation of each real harmonic coefficient.
+    """
+
+    def __init__(self, fit: HarmonicFit, *, gap: float, quality_factor: float,
+                 drive_amplitude: float | None, grid: int = 4096) -> None:
+        self.omega = float(fit.omega)
+        self.n_h = int(fit.n_harmonics)
+        self.gap = float(gap)
+        self.quality_factor = float(quality_factor)
+        self.drive_amplitude = drive_amplitude
+        self.grid = int(grid)
+        self.Y = fit.complex_amplitudes.copy()
+        self.y = synthesize(self.Y, self.grid)
+        self.ydot = synthesize(self.Y, self.grid, 1, self.omega)
+        sig = float(fit.noise_rms)
+        n = max(int(fit.n_samples), 1)
+        self.noise_rms = sig
+        self.sigma_rows = np.full(2 * self.n_h + 1, sig * math.sqrt(2.0 / n))
+        self.sigma_rows[0] = sig / math.sqrt(n)
+        self.theta = 2.0 * np.pi * np.arange(self.grid) / self.grid
+
+    def true_orbit(self, spec: ModelSpec) -> tuple[FloatArray, FloatArray, ComplexArray]:
+        """Deflection, rate on the grid and harmonics of the true tip motion under ``spec``."""
+        if spec.detector is None:
+            return self.y, self.ydot, self.Y
+        x = invert_detector(self.y, *spec.detector)
+        X = harmonics(x, self.n_h)
+        return synthesize(X, self.grid), synthesize(X, self.grid, 1, self.omega), X
+
+
+@final
+@dataclass
+class Solution:
+    """A fitted candidate: ``coef = [K, D, B, c_1..c_m]``, whitened residual, chi2.
+
+    ``values`` are the nonlinear parameters that built ``spec`` (``a0``, ``phi`` and the
+    extension's, in the order of its parameters), when known.
+    """
+
+    spec: ModelSpec
+    coef: FloatArray
+    residual: FloatArray
+    chi2: float
+    values: tuple[float, ...] = ()
+
+
+@final
+class HarmonicBalance:
+    """Whitened harmonic-balance least squares for :class:`ModelSpec` candidates.
+
+    Parameters
+    ----------
+    orbit : PeriodicOrbit
+    stiffness_prior : float
+        Relative standard deviation of the prior ``K = 1``. ``K = (f_free / f0)^2`` is fixed
+        by the resonance frequency of the thermal tune (known to ~1e-4); a wrong spring
+        constant only rescales the force unit. A loose prior would let ``K`` absorb the
+        softening of any long-range force (the electrostatic signature).
+    prior_rel : float
+        Relative standard deviation of the priors ``D = 1/Q`` and ``B = F_c`` (Q and the free
+        amplitude are known to a few per cent).
+    box_rel : float
+        Half width of the boxes on ``D`` and ``B`` (relative); ``K``'s box is 10 prior widths.
+    """
+
+    def __init__(self, orbit: PeriodicOrbit, *, stiffness_prior: float = 1e-3,
+                 prior_rel: float = 0.05, box_rel: float = 0.15) -> None:
+        self.orbit = orbit
+        self.stiffness_prior = float(stiffness_prior)
+        self.prior_rel = float(prior_rel)
+        self.box_rel = float(box_rel)
+        o = orbit
+        n = np.arange(o.n_h + 1)
+        self._n = n
+        self._d0 = 1.0 / o.quality_factor
+        self._lever0 = 1.0 - (n * o.omega) ** 2 + 1j * n * o.omega * self._d0
+        # lever-only whitening until a reference model sets the full Hill operator
+        self.set_whitening(None)
+
+    # ------------------------------------------------------------------ whitening
+    def set_whitening(self, reference: Solution | None) -> None:
+        """Whitening ``diag(1/sigma) J^-1`` from the Hill operator of ``reference``.
+
+        None: the lever alone with the calibrated ``K = 1``, ``D = 1/Q``.
+        """
+        o = self.orbit
+        nh = o.n_h
+        nb = 2 * nh + 1
+        m = o.grid
+        th = o.theta
+        k = np.arange(1, nh + 1)
+        basis = np.empty((m, nb))
+        basis[:, 0] = 1.0
+        basis[:, 1 : nh + 1] = np.cos(np.outer(th, k))
+        basis[:, nh + 1 :] = np.sin(np.outer(th, k))
+        dbasis = np.zeros_like(basis)
+        dbasis[:, 1 : nh + 1] = -o.omega * k * basis[:, nh + 1 :]
+        dbasis[:, nh + 1 :] = o.omega * k * basis[:, 1 : nh + 1]
+        K, D = 1.0, self._d0
+        fx = fv = np.zeros(m)
+        if reference is not None:
+            K, D = float(reference.coef[0]), float(reference.coef[1])
+            fx, fv = self._force_gradients(reference)
+        # lever part: diagonal in (cos, sin) pairs
+        J = np.zeros((nb, nb))
+        J[0, 0] = K
+        w = o.omega * k
+        J[k, k] = K - w**2
+        J[k + nh, k + nh] = K - w**2
+        J[k + nh, k] = -D * w      # cos -> -D w sin : coefficient of sin
+        J[k, k + nh] = D * w       # sin -> +D w cos
+        proj = basis.T * (2.0 / m)
+        proj[0] *= 0.5
+        J += proj @ (fx[:, None] * basis + fv[:, None] * dbasis)
+        inv = np.linalg.pinv(J, rcond=1e-10)
+        self._W = inv / o.sigma_rows[:, None]
+
+    def _force_gradients(self, sol: Solution) -> tuple[FloatArray, FloatArray]:
+        """``dF/dx`` and ``dF/dx'`` along the orbit for the reference solution's force."""
+        o = self.orbit
+        spec = sol.spec
+        x, v, _ = o.true_orbit(spec)
+        z, zd = o.gap - x, -v
+        c = sol.coef[N_LEVER:]
+        att = neck_state(z, spec.a0, spec.neck_length)
+        h = 1e-6 * max(float(np.ptp(z)), 1e-9)
+        fz = (spec.columns(z + h, zd, att) - spec.columns(z - h, zd, att)) @ c / (2 * h)
+        hv = 1e-6 * max(float(np.ptp(zd)), 1e-9)
+        fzd = (spec.columns(z, zd + hv, att) - spec.columns(z, zd - hv, att)) @ c / (2 * hv)
+        return -fz, -fzd
+
+    # ------------------------------------------------------------------ rows
+    def design(self, spec: ModelSpec) -> tuple[FloatArray, FloatArray]:
+        """Whitened design ``A`` (rows, N_LEVER + n_force) and target ``b`` for ``spec``."""
+        o = self.orbit
+        n = self._n
+        x, v, X = o.true_orbit(spec)
+        z, zd = o.gap - x, -v
+        att = neck_state(z, spec.a0, spec.neck_length)
+        cols = spec.columns(z, zd, att)                       # (M, m)
+        F = harmonics(cols.T, o.n_h)                          # (m, n_h + 1)
+        G = np.ones(n.size, complex)
+        if spec.mode2 is not None:
+            ratio, q2, g2 = spec.mode2
+            h2 = 1.0 / (ratio**2 - (n * o.omega) ** 2 + 1j * n * o.omega * ratio / q2)
+            G = 1.0 + g2 * self._lever0 * h2
+        XG = X / G
+        drive = np.zeros(n.size, complex)
+        drive[1] = -np.exp(-1j * spec.drive_phase)
+        A = np.vstack([XG, 1j * n * o.omega * XG, drive, F])  # (N_LEVER + m, n_h + 1)
+        b = (n * o.omega) ** 2 * XG
+        Ar = to_real(A).T
+        br = to_real(b)
+        return self._W @ Ar, self._W @ br
+
+    def bounds(self, spec: ModelSpec) -> tuple[FloatArray, FloatArray]:
+        """Boxes of ``[K, D, B, c_1..c_m]``: calibration boxes and physical signs."""
+        p = N_LEVER + spec.n_force
+        fc = self.orbit.drive_amplitude
+        box, sk = self.box_rel, self.stiffness_prior
+        lo = np.full(p, -np.inf)
+        hi = np.full(p, np.inf)
+        lo[0], hi[0] = 1 - 10 * sk, 1 + 10 * sk
+        lo[1], hi[1] = self._d0 * (1 - box), self._d0 * (1 + box)
+        if fc is not None and fc > 0:
+            lo[2], hi[2] = fc * (1 - box), fc * (1 + box)
+        else:
+            lo[2] = 0.0
+        for j, s in enumerate(spec.signs()):
+            if s > 0:
+                lo[N_LEVER + j] = 0.0
+            elif s < 0:
+                hi[N_LEVER + j] = 0.0
+        return lo, hi
+
+    def _prior_rows(self, p: int) -> tuple[FloatArray, FloatArray]:
+        """Prior rows ``P`` and targets ``t`` (residual ``P coef - t``, in sigma units)."""
+        fc = self.orbit.drive_amplitude
+        rel, sk = self.prior_rel, self.stiffness_prior
+        rows = [np.eye(p)[0] / sk, np.eye(p)[1] / (rel * self._d0)]
+        t = [1.0 / sk, 1.0 / rel]
+        if fc is not None and fc > 0:
+            rows.append(np.eye(p)[2] / (rel * fc))
+            t.append(1.0 / rel)
+        return np.array(rows), np.array(t)
+
+    def prior_residual(self, coef: FloatArray) -> FloatArray:
+        """The calibration-prior rows of the residual for ``coef`` (sigma units)."""
+        P, t = self._prior_rows(coef.size)
+        return P @ coef - t
+
+    def solve(self, spec: ModelSpec, values: tuple[float, ...] = ()) -> Solution:
+        """Bounded linear least squares of the whitened rows plus calibration priors."""
+        A, b = self.design(spec)
+        p = A.shape[1]
+        lo, hi = self.bounds(spec)
+        P, t = self._prior_rows(p)
+        Af = np.vstack([A, P])
+        bf = np.concatenate([b, t])
+        # column scaling for conditioning
+        scale = np.linalg.norm(Af, axis=0)
+        scale[scale == 0] = 1.0
+        res = lsq_linear(Af / scale, bf, bounds=(lo * scale, hi * scale), method="bvls",
+                         lsmr_tol="auto")
+        coef = res.x / scale
+        r = Af @ coef - bf
+        return Solution(spec=spec, coef=coef, residual=r, chi2=float(r @ r),
+                        values=tuple(values))

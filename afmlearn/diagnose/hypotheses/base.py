@@ -1,0 +1,103 @@
+"""`AbstractHypothesis`: one physical cause, tested by fitting the model it extends.
+
+A hypothesis names a cause of design.md section 3 and says how the baseline
+:class:`~afmlearn.diagnose.spec.ModelSpec` is extended: which nonlinear parameters the
+extension adds (:meth:`parameters`, with a search grid and bounds) and how their values enter
+the spec (:meth:`extend`, the one hook every cause fills in). The diagnosis fits the extension
+(grid, then joint refinement with ``a0`` and the drive phase), measures its gain on held-out
+data and asks :meth:`evidence` for a one-line physical reading of the fit.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import ClassVar, final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..model import DiagnosisModel
+from ..spec import ModelSpec
+
+__all__ = ["AbstractHypothesis", "Parameter", "Context"]
+
+
+@final
+@dataclass(frozen=True)
+class Parameter:
+    """A nonlinear parameter of an extension: bounds, search grid, log scale or not.
+
+    ``nested`` is the value at which the extension reduces to the baseline (None when a
+    linear coefficient switches the extension off, so any value nests it).
+    """
+
+    name: str
+    low: float
+    high: float
+    grid: tuple[float, ...]
+    log: bool = False
+    nested: float | None = None
+
+
+@final
+@dataclass(frozen=True)
+class Context:
+    """What the hypotheses may know about the recording (never its labels).
+
+    Attributes
+    ----------
+    length_m : float
+        ``L_ref`` [m] (the rest gap).
+    amplitude : float
+        First-harmonic amplitude of the orbit / L_ref.
+    z_min, z_max : float
+        Smallest and largest gap of the measured orbit / L_ref.
+    tip_radius : float
+        Tip radius / L_ref (from the file, else 10 nm).
+    higher_mode_ratios : tuple of float
+        Measured ``f_i / f0`` from the file (empty when unknown).
+    free_detector : (float, float) or None
+        ``(b2, b3)`` estimated from the harmonics of the free trace, when there is one.
+    """
+
+    length_m: float
+    amplitude: float
+    z_min: float
+    z_max: float
+    tip_radius: float
+    higher_mode_ratios: tuple[float, ...] = ()
+    free_detector: tuple[float, float] | None = None
+
+
+class AbstractHypothesis(abc.ABC):
+    """One cause and the model extension that represents it."""
+
+    #: the cause's name in design.md section 3
+    cause: ClassVar[str] = ""
+    #: the extension in words (report)
+    extension: ClassVar[str] = ""
+    #: equation-error solutions handed to the output-error stage as starts
+    n_starts: ClassVar[int] = 3
+
+    @abc.abstractmethod
+    def parameters(self, ctx: Context) -> list[Parameter]:
+        """The extension's nonlinear parameters for this recording."""
+
+    @abc.abstractmethod
+    def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
+        """The baseline ``spec`` extended with parameter ``values`` (order of parameters)."""
+
+    def nested_values(self, params: Sequence[Parameter]) -> list[float]:
+        """Parameter values at which the extension is the baseline."""
+        return [p.grid[0] if p.nested is None else p.nested for p in params]
+
+    def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
+                 energy: NDArray[np.float64] | None = None) -> str:
+        """One line: what the fitted extension says physically, and how strongly."""
+        return (f"{self.extension}: chi2 drop {delta_chi2:.1f} (orbit-noise units), "
+                f"held-out gain {gain:+.3f}")
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"

@@ -1,0 +1,36 @@
+"""Cause ``electrostatic``: a long-range attraction slower than ``1/z^2``."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import final
+
+import numpy as np
+
+from ..model import DiagnosisModel
+from ..spec import ModelSpec
+from .base import AbstractHypothesis, Context, Parameter
+
+__all__ = ["Electrostatic"]
+
+
+@final
+class Electrostatic(AbstractHypothesis):
+    """Add the sphere--plane electrostatic term ``1/(z (z + R))``, R from 1 to 100 nm."""
+
+    cause = "electrostatic"
+    extension = "electrostatic sphere term 1/(z(z+R))"
+
+    def parameters(self, ctx: Context) -> list[Parameter]:
+        lo, hi = 1e-9 / ctx.length_m, 100e-9 / ctx.length_m
+        grid = tuple(sorted(set(np.geomspace(lo, hi, 7).tolist() + [ctx.tip_radius])))
+        return [Parameter("radius", lo, hi, grid, log=True)]
+
+    def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
+        return spec.replace(electrostatic_radius=float(values[0]))
+
+    def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
+                 energy=None) -> str:
+        r = (model.spec.electrostatic_radius or 0.0) * model.scales.length
+        return (f"1/(z(z+R)) attraction with R = {r * 1e9:.1f} nm; chi2 drop {delta_chi2:.1f},"
+                f" held-out gain {gain:+.3f}")

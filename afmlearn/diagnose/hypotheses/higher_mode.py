@@ -1,0 +1,49 @@
+"""Cause ``higher_mode``: a second flexural eigenmode takes part (e.g. 6:1 internal resonance)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import final
+
+import numpy as np
+
+from ..model import DiagnosisModel
+from ..spec import ModelSpec
+from .base import AbstractHypothesis, Context, Parameter
+
+__all__ = ["HigherMode"]
+
+
+@final
+class HigherMode(AbstractHypothesis):
+    """Add mode 2 (frequency ratio, Q2, tip-force gain g2) sharing the tip force and drive.
+
+    The ratio is searched on ``[4.5, 8]`` (rectangular beam: 6.267) unless the file gives the
+    measured ``f2``; then within +-3 % of it.
+    """
+
+    cause = "higher_mode"
+    extension = "second eigenmode"
+
+    def parameters(self, ctx: Context) -> list[Parameter]:
+        if ctx.higher_mode_ratios:
+            r = float(ctx.higher_mode_ratios[0])
+            ratio = Parameter("frequency_ratio", 0.97 * r, 1.03 * r,
+                              tuple(np.linspace(0.97 * r, 1.03 * r, 13)))
+        else:
+            ratio = Parameter("frequency_ratio", 4.5, 8.0, tuple(np.linspace(4.5, 8.0, 71)))
+        return [ratio,
+                Parameter("quality_factor_2", 30.0, 5000.0, (300.0, 1500.0), log=True),
+                Parameter("force_gain", 1e-4, 10.0, (0.01, 1.0), log=True, nested=1e-4)]
+
+    def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
+        r, q2, g2 = (float(v) for v in values)
+        return spec.replace(mode2=(r, q2, g2))
+
+    def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
+                 energy=None) -> str:
+        r, q2, g2 = model.spec.mode2 or (np.nan, np.nan, np.nan)
+        n = r / model.omega
+        return (f"second mode at f2/f0 = {r:.3f} (Q2 = {q2:.0f}, gain {g2:.2f}) next to "
+                f"harmonic {n:.2f} of the drive; chi2 drop {delta_chi2:.1f}, held-out gain "
+                f"{gain:+.3f}")

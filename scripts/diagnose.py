@@ -1,0 +1,46 @@
+"""Diagnose a recorded trace: what the baseline gets wrong, the cause, the gain (Hydra entry).
+
+Examples
+--------
+    python scripts/diagnose.py trace=outputs/demo/measured.h5 out_dir=outputs/diagnose
+    python scripts/diagnose.py trace=sweep.h5 row=40 out_dir=out diagnoser.progress=true
+
+Writes <out_dir>/report.json (design.md section 3), report.md and figures (see
+afmlearn.diagnose.report.diagnose_trace); the file's /labels group is never read. Bad input
+(missing calibration, fewer than 20 samples per drive period, clipped signal, NaN, a varying
+gap, not a trace file, a sweep without `row`) prints `error: ...` and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import hydra
+from hydra.utils import instantiate
+from omegaconf import DictConfig
+
+from afmlearn.diagnose.report import diagnose_trace
+
+
+@hydra.main(config_path="../conf", config_name="diagnose", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    """Run :func:`afmlearn.diagnose.report.diagnose_trace` and print the verdict."""
+    try:
+        diagnoser = instantiate(cfg.diagnoser)
+        rep = diagnose_trace(cfg.trace, cfg.out_dir, row=cfg.row, diagnoser=diagnoser,
+                             figures=bool(cfg.figures))
+    except ValueError as err:  # InputError, TraceFormatError and bad settings are ValueErrors
+        print(f"error: {err}", file=sys.stderr)
+        sys.exit(2)
+    print(f"cause        {rep['cause']}  (confidence {rep['confidence']:.2f})")
+    print(f"gain         {rep['gain']:.3f}  (held-out NRMSE {rep['baseline']['heldout_nrmse']:.4g}"
+          f" -> {rep['extended']['heldout_nrmse']:.4g})")
+    print(f"baseline     {rep['baseline']['equation']}")
+    print(f"extended     {rep['extended']['equation']}")
+    for warning in rep["warnings"]:
+        print(f"warning: {warning}")
+    print(f"report       {cfg.out_dir}/report.md")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,32 @@
+"""Fixtures of the diagnosis tests: hidden-effect traces made once per session."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from afmlearn.diagnose.synthetic import Case, hidden_trace
+
+
+@pytest.fixture(scope="session")
+def make_trace(tmp_path_factory):
+    """``make_trace(cause, seed, spp=200, periods=300, noise=0.01) -> (path, case)``.
+
+    The cause is forced (the parameters are drawn); the file name says nothing about it.
+    """
+    cache: dict[tuple, tuple[Path, Case]] = {}
+    folder = tmp_path_factory.mktemp("diagnose")
+
+    def make(cause: str | None, seed: int, *, spp: int = 200, periods: float = 300.0,
+             noise: float = 0.01) -> tuple[Path, Case]:
+        key = (cause, seed, spp, periods, noise)
+        if key not in cache:
+            path = folder / f"trace-{len(cache):03d}.h5"
+            case = hidden_trace(np.random.default_rng([seed, 77]), path, cause=cause,
+                                samples_per_period=spp, n_periods=periods, noise_level=noise)
+            cache[key] = (path, case)
+        return cache[key]
+
+    return make

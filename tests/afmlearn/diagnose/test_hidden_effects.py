@@ -1,0 +1,68 @@
+"""Hidden-effect tests (issue 5): one effect of the vocabulary, or none, switched on by a seeded
+draw the diagnosis cannot see; it must name it with a positive held-out gain.
+
+The draw (cause and every parameter: Q 150-450, free amplitude 1.2-1.8 gaps, tip radius,
+Hamaker constant, E*, a0, the effect's strength) happens inside
+:func:`afmlearn.diagnose.synthetic.hidden_trace` from the test's generator; the trace file's
+name is neutral and the diagnosis reads it without its labels. The truth is compared only
+afterwards.
+
+``contact_geometry`` is held to a weaker standard, for a measured reason (docs/diagnose.md):
+with a0 and the stiffness free, a steady tapping orbit does not determine the contact exponent
+(chi2 drop < 0.5 for cones of exponent 2.3-2.65 at 1,000 samples per period). There the test
+requires that the effect is not blamed on another cause (``none`` or itself).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from afmlearn.diagnose import CAUSES, Diagnoser
+from afmlearn.diagnose.synthetic import hidden_trace
+from afmlearn.io import read_trace
+
+
+def _diagnose(tmp_path, seed: list[int], *, cause: str | None = None, spp: int = 200,
+              noise: float = 0.01):
+    path = tmp_path / f"recording-{'-'.join(map(str, seed))}.h5"
+    case = hidden_trace(np.random.default_rng(seed), path, cause=cause,
+                        samples_per_period=spp, n_periods=300, noise_level=noise)
+    dg = Diagnoser().fit(read_trace(path))          # no labels, no file name
+    return case, dg
+
+
+def _check(case, dg) -> None:
+    truth = case.cause
+    msg = (f"truth {truth} {case.effect}, named {dg.cause_} (gain {dg.gain_:.3f}); "
+           + ", ".join(f"{c.cause} {c.delta_chi2:.1f}/{c.threshold:.1f}/{c.gain:+.3f}"
+                       for c in dg.candidates_))
+    if truth == "none":
+        assert dg.cause_ == "none", msg
+    elif truth == "contact_geometry":
+        assert dg.cause_ in ("none", "contact_geometry"), msg
+    else:
+        assert dg.cause_ == truth, msg
+        assert dg.gain_ > 0.0, msg
+        assert dg.extended_nrmse_ < dg.baseline_nrmse_, msg
+
+
+@pytest.mark.parametrize("draw", range(4))
+def test_hidden_effect_fast(tmp_path, draw):
+    case, dg = _diagnose(tmp_path, [20261124, draw])
+    _check(case, dg)
+
+
+@pytest.mark.parametrize("draw", range(2))
+def test_null_trace_fast(tmp_path, draw):
+    case, dg = _diagnose(tmp_path, [4242, draw], cause="none")
+    _check(case, dg)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cause", CAUSES)
+@pytest.mark.parametrize("draw", range(3))
+def test_hidden_effect_every_cause(tmp_path, cause, draw):
+    """Every cause, random parameters, 1,000 samples per period at 0.5 % noise."""
+    case, dg = _diagnose(tmp_path, [777, draw], cause=cause, spp=1000, noise=0.005)
+    _check(case, dg)

@@ -1,0 +1,88 @@
+"""The compiled diagnosis kernel against its plain-Python twin, and physics of its orbits."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from afmlearn.diagnose._kernel import simulate_model, simulate_reference
+from afmlearn.diagnose.model import DiagnosisModel
+from afmlearn.diagnose.output_error import periodic_orbit
+from afmlearn.diagnose.spec import ModelSpec
+from simulator import Scales
+
+SCALES = Scales(spring_constant=20.0, resonance_frequency=3e5, length=1e-8)
+
+
+def _model(**spec) -> DiagnosisModel:
+    s = ModelSpec(a0=0.03, drive_phase=0.3, **spec)
+    n = s.n_force
+    coef = np.zeros(3 + n)
+    coef[:3] = [1.0, 1 / 300, 0.009]
+    coef[3:5] = [-5e-5, 2.3]
+    if s.visco_exponent is not None:
+        coef[5] = 0.2
+    if s.neck_length is not None:
+        coef[-1] = -0.4
+    return DiagnosisModel(spec=s, coef=coef, omega=1.0, gap=1.0, scales=SCALES)
+
+
+class _Force:
+    def __init__(self, m: DiagnosisModel) -> None:
+        self.m, self.a0, self.dc = m, m.spec.a0, float(m.spec.neck_length or 0.0)
+
+    def __call__(self, z, zd, att):
+        return float(self.m.force(np.array([z]), np.array([zd]), np.array([att]))[0])
+
+
+@pytest.mark.parametrize("spec", [{}, {"visco_exponent": 0.5}, {"neck_length": 0.05},
+                                  {"mode2": (6.1, 900.0, 1.0)}], ids=str)
+def test_kernel_matches_reference(spec):
+    m = _model(**spec)
+    from afmlearn.diagnose.output_error import _args
+    args = _args(m)
+    s0 = np.array([0.9, 0.4, 0.0, 0.0])
+    dt = 2 * math.pi / 200
+    fast, _, _ = simulate_model(s0, False, 0.0, dt, 400, 2, *args)
+    ref = simulate_reference(s0, False, 0.0, dt, 400, 2, args[0], _Force(m))
+    assert np.max(np.abs(fast - ref)) < 1e-10
+
+
+def _settled(m: DiagnosisModel) -> np.ndarray:
+    """State at tau = 0 after 3000 periods from the free orbit's start."""
+    x, v = m.simulate(np.array([0.0, 2.7, 0.0, 0.0]), attached0=False, tau0=0.0, dtau=0.01,
+                      n_samples=1, substeps=1, settle_periods=3000)
+    return np.array([x[0], v[0], 0.0, 0.0])
+
+
+def test_conservative_orbit_balances_drive_and_damping():
+    """On a periodic orbit of a conservative force, drive input = lever damping."""
+    m = _model()
+    x, v, ok = periodic_orbit(m, _settled(m), False, n_out=2048)
+    assert ok
+    tau = np.arange(x.size) * 2 * math.pi / x.size
+    drive = m.coef[2] * np.cos(tau - m.spec.drive_phase)
+    e_in = np.mean(drive * v) * 2 * math.pi
+    e_damp = np.mean(m.coef[1] * v**2) * 2 * math.pi
+    assert abs(e_in - e_damp) < 1e-6 * e_in
+
+
+def test_neck_loss_is_the_loop_area_and_converges_with_the_step():
+    """The neck takes n0 d_c / 2 per cycle (the ramp's triangle); switches are located, so the
+    orbit does not depend on the step count (a fixed step would make it first order)."""
+    m = _model(neck_length=0.05)
+    orbits = []
+    s0 = _settled(m)
+    for n in (256, 1024, 4096):
+        x, v, ok = periodic_orbit(m, s0, False, n_out=n)
+        assert ok
+        orbits.append(np.fft.rfft(x)[:8] / n)
+    assert np.max(np.abs(orbits[0] - orbits[2])) < 1e-6
+    assert np.max(np.abs(orbits[1] - orbits[2])) < 1e-7
+    # energy into the sample = drive input - damping (one period, fine grid)
+    tau = np.arange(x.size) * 2 * math.pi / x.size
+    drive = m.coef[2] * np.cos(tau - m.spec.drive_phase)
+    e_ts = np.mean(drive * v - m.coef[1] * v**2) * 2 * math.pi
+    assert e_ts == pytest.approx(0.4 * 0.05 / 2, rel=2e-3)
