@@ -23,6 +23,7 @@ FULL = [
     ["bench_identify_accuracy.py"],
     ["bench_qrnn_speed.py"],
     ["bench_qrnn_accuracy.py"],
+    ["bench_diagnose.py", "--calibrate"],
 ]
 QUICK = [
     ["bench_integrator.py", "--quick", "--no-doc"],
@@ -32,6 +33,7 @@ QUICK = [
     ["bench_identify_speed.py", "--quick"],
     ["bench_identify_accuracy.py", "--quick"],
     ["bench_qrnn_accuracy.py", "--quick"],
+    ["bench_diagnose.py", "--quick"],
 ]
 
 

@@ -103,6 +103,20 @@ class DiagnosisModel:
         Q2 = g2 * h2 * (d - Fn)
         return synthesize(Q2, orbit.grid), synthesize(Q2, orbit.grid, 1, self.omega)
 
+    def kernel_args(self) -> tuple:
+        """The model's arguments of :func:`._kernel.simulate_model` after ``n_samples,
+        substeps``: lever vector, term encoding, coefficients, ``a0``, neck, ``d_c``."""
+        s = self.spec
+        kinds, p1, p2 = s.library().encode()
+        n_lib = kinds.size
+        c = self.force_coefficients
+        ratio, q2, g2 = s.mode2 if s.mode2 is not None else (0.0, 1.0, 0.0)
+        lever = np.array([self.gap, self.coef[0], self.coef[1], self.coef[2], s.drive_phase,
+                          self.omega, ratio**2, ratio / q2, g2, float(s.mode2 is not None)])
+        neck = np.array([c[n_lib]], float) if s.neck_length is not None else np.zeros(1)
+        return (lever, kinds, p1, p2, np.ascontiguousarray(c[:n_lib]), float(s.a0), neck,
+                float(s.neck_length or 0.0))
+
     def simulate(self, state0: FloatArray, *, attached0: bool, tau0: float, dtau: float,
                  n_samples: int, substeps: int, settle_periods: int = 0
                  ) -> tuple[FloatArray, FloatArray]:
@@ -114,16 +128,7 @@ class DiagnosisModel:
 
         Returns two arrays of shape (n_samples,) (NaN after a blow-up).
         """
-        s = self.spec
-        kinds, p1, p2 = s.library().encode()
-        n_lib = kinds.size
-        c = self.force_coefficients
-        ratio, q2, g2 = s.mode2 if s.mode2 is not None else (0.0, 1.0, 0.0)
-        lever = np.array([self.gap, self.coef[0], self.coef[1], self.coef[2], s.drive_phase,
-                          self.omega, ratio**2, ratio / q2, g2, float(s.mode2 is not None)])
-        neck = (np.array([c[n_lib]], float) if s.neck_length is not None else np.zeros(1))
-        args = (lever, kinds, p1, p2, np.ascontiguousarray(c[:n_lib]), float(s.a0), neck,
-                float(s.neck_length or 0.0))
+        args = self.kernel_args()
         state = np.asarray(state0, float)
         att = bool(attached0)
         if settle_periods > 0:

@@ -32,19 +32,6 @@ __all__ = ["periodic_orbit", "OutputError"]
 FloatArray = NDArray[np.float64]
 
 
-def _args(model: DiagnosisModel) -> tuple:
-    s = model.spec
-    kinds, p1, p2 = s.library().encode()
-    n_lib = kinds.size
-    c = model.force_coefficients
-    ratio, q2, g2 = s.mode2 if s.mode2 is not None else (0.0, 1.0, 0.0)
-    lever = np.array([model.gap, model.coef[0], model.coef[1], model.coef[2], s.drive_phase,
-                      model.omega, ratio**2, ratio / q2, g2, float(s.mode2 is not None)])
-    neck = np.array([c[n_lib]], float) if s.neck_length is not None else np.zeros(1)
-    return (lever, kinds, p1, p2, np.ascontiguousarray(c[:n_lib]), float(s.a0), neck,
-            float(s.neck_length or 0.0))
-
-
 def periodic_orbit(model: DiagnosisModel, state0: FloatArray, attached0: bool, *,
                    n_out: int = 1024, max_iter: int = 12, tol: float = 1e-10,
                    settle_periods: int = 0, multipliers: list | None = None,
@@ -63,7 +50,7 @@ def periodic_orbit(model: DiagnosisModel, state0: FloatArray, attached0: bool, *
     stable orbit).
     """
     T = 2 * math.pi / model.omega
-    args = _args(model)
+    args = model.kernel_args()
     dim = 4 if model.spec.mode2 is not None else 2
     att = bool(attached0)
 

@@ -41,8 +41,7 @@ class _Force:
                                   {"mode2": (6.1, 900.0, 1.0)}], ids=str)
 def test_kernel_matches_reference(spec):
     m = _model(**spec)
-    from afmlearn.diagnose.output_error import _args
-    args = _args(m)
+    args = m.kernel_args()
     s0 = np.array([0.9, 0.4, 0.0, 0.0])
     dt = 2 * math.pi / 200
     fast, _, _ = simulate_model(s0, False, 0.0, dt, 400, 2, *args)
