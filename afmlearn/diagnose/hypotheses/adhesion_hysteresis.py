@@ -9,7 +9,7 @@ import numpy as np
 
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
-from .base import AbstractHypothesis, Context, Parameter
+from .base import AbstractHypothesis, Context, Parameter, energy_text
 
 __all__ = ["AdhesionHysteresis"]
 
@@ -40,4 +40,5 @@ class AdhesionHysteresis(AbstractHypothesis):
                  energy=None) -> str:
         dc = (model.spec.neck_length or 0.0) * model.scales.length
         return (f"loss at pull-off: neck to {dc * 1e9:.2f} nm past contact; chi2 drop "
-                f"{delta_chi2:.1f}, held-out gain {gain:+.3f}")
+                f"{delta_chi2:.1f}, held-out gain {gain:+.3f}"
+                f"{energy_text(model, energy)}")

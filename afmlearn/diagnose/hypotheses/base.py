@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
 
-__all__ = ["AbstractHypothesis", "Parameter", "Context"]
+__all__ = ["AbstractHypothesis", "Parameter", "Context", "energy_text"]
 
 
 @final
@@ -95,9 +95,20 @@ class AbstractHypothesis(abc.ABC):
 
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
                  energy: NDArray[np.float64] | None = None) -> str:
-        """One line: what the fitted extension says physically, and how strongly."""
+        """One line: what the fitted extension says physically, and how strongly.
+
+        ``energy``: energy into the sample per cycle [k L_ref^2] of (baseline, extension).
+        """
         return (f"{self.extension}: chi2 drop {delta_chi2:.1f} (orbit-noise units), "
-                f"held-out gain {gain:+.3f}")
+                f"held-out gain {gain:+.3f}{energy_text(model, energy)}")
+
+
+def energy_text(model: DiagnosisModel, energy: NDArray[np.float64] | None) -> str:
+    """``"; sample takes X eV/cycle (baseline Y)"`` or empty."""
+    if energy is None:
+        return ""
+    ev = model.scales.energy / 1.602176634e-19
+    return f"; sample takes {energy[1] * ev:.3g} eV/cycle (baseline {energy[0] * ev:.3g})"
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"

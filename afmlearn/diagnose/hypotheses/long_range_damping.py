@@ -9,7 +9,7 @@ import numpy as np
 
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
-from .base import AbstractHypothesis, Context, Parameter
+from .base import AbstractHypothesis, Context, Parameter, energy_text
 
 __all__ = ["LongRangeDamping"]
 
@@ -32,4 +32,5 @@ class LongRangeDamping(AbstractHypothesis):
                  energy=None) -> str:
         zb = (model.spec.damping_decay or 0.0) * model.scales.length
         return (f"loss out of contact, decay length {zb * 1e9:.2f} nm; chi2 drop "
-                f"{delta_chi2:.1f}, held-out gain {gain:+.3f}")
+                f"{delta_chi2:.1f}, held-out gain {gain:+.3f}"
+                f"{energy_text(model, energy)}")

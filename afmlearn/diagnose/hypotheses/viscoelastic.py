@@ -7,7 +7,7 @@ from typing import final
 
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
-from .base import AbstractHypothesis, Context, Parameter
+from .base import AbstractHypothesis, Context, Parameter, energy_text
 
 __all__ = ["Viscoelastic"]
 
@@ -36,8 +36,6 @@ class Viscoelastic(AbstractHypothesis):
 
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
                  energy=None) -> str:
-        txt = (f"loss only while indenting, delta^{model.spec.visco_exponent:.2f} delta' term; "
-               f"chi2 drop {delta_chi2:.1f}, held-out gain {gain:+.3f}")
-        if energy is not None:
-            txt += f"; sample takes {energy[1]:.3g} vs baseline {energy[0]:.3g} (k L^2)/cycle"
-        return txt
+        return (f"loss only while indenting, delta^{model.spec.visco_exponent:.2f} delta' term; "
+                f"chi2 drop {delta_chi2:.1f}, held-out gain {gain:+.3f}"
+                f"{energy_text(model, energy)}")
