@@ -53,9 +53,11 @@ def test_labels_are_never_read(make_trace, tmp_path, monkeypatch):
 
 
 def test_name_cause_rule():
-    # significant needs both the evidence and the gain; the largest gain wins
+    # significant needs both the evidence and the gain; the largest penalised evidence wins
     idx, conf = name_cause([50.0, 30.0, 1.0], [0.2, 0.4, 0.9], [10.0, 10.0, 10.0], 0.05)
-    assert idx == 1 and 0 < conf < 1
+    assert idx == 0 and 0 < conf < 1
+    idx, _ = name_cause([50.0, 45.0], [0.2, 0.4], [30.0, 10.0], 0.05)
+    assert idx == 1                     # the threshold penalises the flexible extension
     idx, conf = name_cause([5.0, 30.0], [0.5, 0.01], [10.0, 10.0], 0.05)
     assert idx is None and conf > 0.5
 
