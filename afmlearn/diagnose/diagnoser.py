@@ -493,15 +493,18 @@ def name_cause(delta_chi2: list[float], gains: list[float], thresholds: list[flo
     that both recover most of an effect swap places at random; on the first 21 benchmark
     traces at 1,000 samples per period it named electrostatics 0/2 and visco-elasticity 0/3
     against 2/2 and 2/3 for the evidence. See docs/diagnose.md.) The confidence is the softmax
-    weight of the answer over the penalised evidences halved (``none`` counting 0), a
-    likelihood-ratio weight.
+    weight of the answer over the penalised evidences halved (``none`` counting 0; extensions
+    without held-out gain left out), a likelihood-ratio weight.
     """
     d = np.asarray(delta_chi2, float)
     g = np.asarray(gains, float)
     t = np.asarray(thresholds, float)
     sig = np.flatnonzero((d > t) & (g > min_gain))
     idx = int(sig[np.argmax((d - t)[sig])]) if sig.size else None
-    scores = np.concatenate([[0.0], np.maximum(d - t, -50.0) / 2.0])
+    # an extension whose fit-span evidence does not carry over to the held-out span is an
+    # over-fit, not an alternative explanation: it does not dilute the confidence
+    pen = np.where(g > min_gain, np.maximum(d - t, -50.0), -np.inf) / 2.0
+    scores = np.concatenate([[0.0], pen])
     w = np.exp(scores - scores.max())
     w /= w.sum()
     return idx, float(w[0 if idx is None else idx + 1])
