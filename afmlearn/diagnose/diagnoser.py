@@ -43,6 +43,7 @@ from typing import Any, final
 import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
+from tqdm.auto import tqdm
 
 from afmlearn.io import Trace
 from afmlearn.metrics import nrmse
@@ -153,7 +154,7 @@ class Diagnoser:
         Cap on the periods each model is run before the held-out span (it starts there from
         the measured state and settles on its own attractor: about 2.9 Q periods).
     progress : bool
-        Print the stages to stderr.
+        Print the stages and a progress bar over the causes to stderr.
 
     Attributes
     ----------
@@ -326,8 +327,10 @@ class Diagnoser:
         self.baseline_nrmse_ = base_nrmse
         # -- hypotheses
         cands: list[Candidate] = []
-        for h in hyps:
-            self._log(f"hypothesis {h.cause}")
+        bar = tqdm(hyps, desc="diagnose: causes", unit="cause", disable=not self.progress,
+                   file=sys.stderr, leave=False)
+        for h in bar:
+            bar.set_postfix_str(h.cause)
             try:
                 starts = fit_extension(hb, base_hb, h, ctx)
                 sol, _ = refine_output_error(oe, starts, h, base, ctx)

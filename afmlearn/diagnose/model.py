@@ -148,8 +148,9 @@ class DiagnosisModel:
         K, D, B = (float(v) for v in self.coef[:N_LEVER])
         terms = " ".join(f"{'+' if c >= 0 else '-'} {abs(c):.{p}g} {n}"
                          for c, n in zip(self.force_coefficients, s.term_names(), strict=True))
+        ph = s.drive_phase
         eq = (f"x'' + {D:.{p}g} x' + {K:.{p}g} x = -F_ts + {B:.{p}g} cos({self.omega:.{p}g} tau"
-              f" - {s.drive_phase:.{p}g});  F_ts = {terms.lstrip('+ ')};  z = "
+              f" {'-' if ph >= 0 else '+'} {abs(ph):.{p}g});  F_ts = {terms.lstrip('+ ')};  z = "
               f"{self.gap:.{p}g} - x, a0 = {s.a0:.{p}g}")
         if s.neck_length is not None:
             eq += f", neck breaks at z = a0 + {s.neck_length:.{p}g}"
