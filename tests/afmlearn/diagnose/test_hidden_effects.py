@@ -63,9 +63,10 @@ def test_null_trace_fast(tmp_path, draw):
 def test_hidden_effects_every_cause(tmp_path):
     """Two random draws per cause at 1,000 samples per period and 0.5 % noise (the issue's
     accurate setting): every null trace ``none``; no ``contact_geometry`` trace blamed on
-    another cause; at least 80 % of the other effects named right with a positive gain
-    (the per-cause rates are in docs/benchmarks.md: the dissipative causes are the ones
-    confused with each other)."""
+    another cause; at least 70 % of the other effects named right with a positive gain.
+    The benchmark measured 83 % over those six causes (60 traces, docs/benchmarks.md; the
+    misses are weak adhesion hysteresis and electrostatics, and dissipation channels confused
+    with each other); 70 % is that rate less one standard error of a 12-trace sample."""
     right, total, failures = 0, 0, []
     for cause in CAUSES:
         for draw in range(2):
@@ -78,4 +79,4 @@ def test_hidden_effects_every_cause(tmp_path):
             right += ok
             if not ok:
                 failures.append(f"{cause} -> {dg.cause_} ({dg.gain_:+.3f})")
-    assert right >= 0.8 * total, f"{right}/{total}: {failures}"
+    assert right >= 0.7 * total, f"{right}/{total}: {failures}"
