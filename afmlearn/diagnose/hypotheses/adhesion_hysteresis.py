@@ -5,11 +5,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import final
 
-import numpy as np
-
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
-from .base import AbstractHypothesis, Context, Parameter, energy_text
+from .base import AbstractHypothesis, Context, Parameter, energy_text, length_parameter
 
 __all__ = ["AdhesionHysteresis"]
 
@@ -30,8 +28,7 @@ class AdhesionHysteresis(AbstractHypothesis):
     n_starts = 12
 
     def parameters(self, ctx: Context) -> list[Parameter]:
-        lo, hi = 0.1e-9 / ctx.length_m, 3e-9 / ctx.length_m
-        return [Parameter("neck_length", lo, hi, tuple(np.geomspace(lo, hi, 12)), log=True)]
+        return [length_parameter("neck_length", 0.1e-9, 3e-9, ctx, 12)]
 
     def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
         return spec.replace(neck_length=float(values[0]))

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
 
-__all__ = ["AbstractHypothesis", "Parameter", "Context", "energy_text"]
+__all__ = ["AbstractHypothesis", "Parameter", "Context", "energy_text", "length_parameter"]
 
 
 @final
@@ -101,6 +101,15 @@ class AbstractHypothesis(abc.ABC):
         """
         return (f"{self.extension}: chi2 drop {delta_chi2:.1f} (orbit-noise units), "
                 f"held-out gain {gain:+.3f}{energy_text(model, energy)}")
+
+
+def length_parameter(name: str, low_m: float, high_m: float, ctx: Context, n: int, *,
+                     extra: tuple[float, ...] = ()) -> Parameter:
+    """A length searched on a log grid of ``n`` points from ``low_m`` to ``high_m`` [m]
+    (in units of ``L_ref``), plus ``extra`` grid points (``L_ref`` units)."""
+    lo, hi = low_m / ctx.length_m, high_m / ctx.length_m
+    grid = sorted({*np.geomspace(lo, hi, n).tolist(), *extra})
+    return Parameter(name, lo, hi, tuple(grid), log=True)
 
 
 def energy_text(model: DiagnosisModel, energy: NDArray[np.float64] | None) -> str:

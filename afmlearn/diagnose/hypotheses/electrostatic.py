@@ -5,11 +5,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import final
 
-import numpy as np
-
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
-from .base import AbstractHypothesis, Context, Parameter
+from .base import AbstractHypothesis, Context, Parameter, length_parameter
 
 __all__ = ["Electrostatic"]
 
@@ -22,9 +20,7 @@ class Electrostatic(AbstractHypothesis):
     extension = "electrostatic sphere term 1/(z(z+R))"
 
     def parameters(self, ctx: Context) -> list[Parameter]:
-        lo, hi = 1e-9 / ctx.length_m, 100e-9 / ctx.length_m
-        grid = tuple(sorted(set(np.geomspace(lo, hi, 7).tolist() + [ctx.tip_radius])))
-        return [Parameter("radius", lo, hi, grid, log=True)]
+        return [length_parameter("radius", 1e-9, 100e-9, ctx, 7, extra=(ctx.tip_radius,))]
 
     def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
         return spec.replace(electrostatic_radius=float(values[0]))

@@ -5,11 +5,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import final
 
-import numpy as np
-
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
-from .base import AbstractHypothesis, Context, Parameter, energy_text
+from .base import AbstractHypothesis, Context, Parameter, energy_text, length_parameter
 
 __all__ = ["LongRangeDamping"]
 
@@ -22,8 +20,7 @@ class LongRangeDamping(AbstractHypothesis):
     extension = "distance-decaying damping exp(-z/z_b) z'"
 
     def parameters(self, ctx: Context) -> list[Parameter]:
-        lo, hi = 1e-9 / ctx.length_m, 20e-9 / ctx.length_m
-        return [Parameter("decay_length", lo, hi, tuple(np.geomspace(lo, hi, 8)), log=True)]
+        return [length_parameter("decay_length", 1e-9, 20e-9, ctx, 8)]
 
     def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
         return spec.replace(damping_decay=float(values[0]))
