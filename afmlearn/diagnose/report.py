@@ -24,6 +24,7 @@ from typing import Any
 import afmlearn
 from afmlearn.io import jsonable, read_trace, write_json
 from afmlearn.io._atomic import atomic_path
+from afmlearn.preprocess import checked_row
 
 from .diagnoser import Diagnoser
 from .model import DiagnosisModel
@@ -91,13 +92,7 @@ def diagnose_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]
     path = Path(path)
     out = Path(out_dir)
     trace = read_trace(path)                          # labels=False: /labels never opened
-    if trace.is_sweep:
-        if row is None or isinstance(row, bool) or not 0 <= int(row) < trace.n_points:
-            raise ValueError(f"row must be an integer in [0, {trace.n_points}) for this sweep "
-                             f"of {trace.n_points} rows, got {row!r}")
-        row = int(row)
-    elif row is not None:
-        raise ValueError(f"row must be null for a single (non-sweep) trace, got {row!r}")
+    row = checked_row(trace, row)
     dg = diagnoser if diagnoser is not None else Diagnoser()
     if not isinstance(dg, Diagnoser):
         raise ValueError(f"diagnoser must be a Diagnoser, got {type(dg).__name__}")

@@ -40,7 +40,7 @@ import numpy as np
 import afmlearn
 from afmlearn.io import Trace, jsonable, read_trace, write_json
 from afmlearn.io._atomic import atomic_path
-from afmlearn.preprocess import Calibrated, calibrate, check_trace
+from afmlearn.preprocess import Calibrated, calibrate, check_trace, checked_row
 
 from .identifier import LINEAR_TERMS, ForceIdentifier
 from .library import AFMLibrary
@@ -90,7 +90,7 @@ def identify_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]
     path = Path(path)
     out = Path(out_dir)
     trace = read_trace(path)                      # labels=False: /labels is never opened
-    row = _checked_row(trace, row)
+    row = checked_row(trace, row)
     ide = identifier if identifier is not None else ForceIdentifier()
     if not isinstance(ide, ForceIdentifier):
         raise ValueError(f"identifier must be a ForceIdentifier, got {type(ide).__name__}")
@@ -121,20 +121,6 @@ def identify_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]
 
 
 # ---------------------------------------------------------------------------- records
-def _checked_row(trace: Trace, row: int | None) -> int | None:
-    if trace.is_sweep:
-        if row is None:
-            raise ValueError(f"row: the trace is a sweep of {trace.n_points} rows; pass row=<i> "
-                             f"with i in [0, {trace.n_points}) to choose the drive frequency")
-        if isinstance(row, bool) or not isinstance(row, int | np.integer) \
-                or not 0 <= int(row) < trace.n_points:
-            raise ValueError(f"row must be an integer in [0, {trace.n_points}), got {row!r}")
-        return int(row)
-    if row is not None:
-        raise ValueError(f"row must be null for a single (non-sweep) trace, got {row!r}")
-    return None
-
-
 def result_record(ide: ForceIdentifier, cal: Calibrated, *, input_path: str | os.PathLike[str],
                   row: int | None, runtime_s: float) -> dict[str, Any]:
     """The JSON-able content of ``result.json`` for a fitted identifier."""

@@ -23,6 +23,7 @@ from afmlearn.preprocess.checks import (
     UndersampledError,
     check_deflection,
     check_trace,
+    checked_row,
     clipped_run,
 )
 from afmlearn.preprocess.derivatives import (
@@ -52,6 +53,7 @@ __all__ = [
     "calibrate",
     "check_deflection",
     "check_trace",
+    "checked_row",
     "clipped_run",
     "default_window",
     "fit_harmonics",

@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike
 from afmlearn.io import Trace
 
 __all__ = [
+    "checked_row",
     "CalibrationError",
     "ClippedSignalError",
     "InputError",
@@ -214,3 +215,18 @@ def _longest_run(mask: np.ndarray) -> int:
     d = np.diff(padded)
     starts, ends = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
     return int((ends - starts).max())
+
+
+def checked_row(trace: Trace, row: int | None) -> int | None:
+    """``row`` validated for ``trace``: required (in range) for a sweep, None otherwise."""
+    if trace.is_sweep:
+        if row is None:
+            raise ValueError(f"row: the trace is a sweep of {trace.n_points} rows; pass row=<i> "
+                             f"with i in [0, {trace.n_points}) to choose the drive frequency")
+        if isinstance(row, bool) or not isinstance(row, int | np.integer) \
+                or not 0 <= int(row) < trace.n_points:
+            raise ValueError(f"row must be an integer in [0, {trace.n_points}), got {row!r}")
+        return int(row)
+    if row is not None:
+        raise ValueError(f"row must be null for a single (non-sweep) trace, got {row!r}")
+    return None
