@@ -3,7 +3,11 @@
 Public API
 ----------
 `Trace`, `Labels`
-    One recording in SI units, and the truth behind a simulated one.
+    One recording in SI units (single record, ramp, sweep, set-point series, lock-in
+    curves), and the truth behind a simulated one.
+`Experiment`
+    The observations of one file that share the cantilever and the tip-sample law (what
+    identification and diagnosis fit); `Experiment.read`, `Experiment.from_trace`.
 `read_trace`, `TraceReader`, `read_rows`
     Load a file whole, or a sweep row by row; labels only when asked for.
 `write_trace`, `TraceWriter`
@@ -19,16 +23,21 @@ Public API
 from afmlearn.io._format import FORMAT, FORMAT_VERSION
 from afmlearn.io.dataset import MANIFEST, iter_traces, shard_path, write_manifest
 from afmlearn.io.errors import TraceFormatError
+from afmlearn.io.experiment import EXPERIMENT_KINDS, Experiment
 from afmlearn.io.jsonfile import jsonable, write_json
 from afmlearn.io.labels import Labels
 from afmlearn.io.reader import TraceReader, read_rows, read_trace
-from afmlearn.io.trace import Trace
+from afmlearn.io.trace import SEGMENT_APPROACH, SEGMENT_RETRACT, Trace
 from afmlearn.io.writer import TraceWriter, write_trace
 
 __all__ = [
+    "EXPERIMENT_KINDS",
+    "Experiment",
     "FORMAT",
     "FORMAT_VERSION",
     "MANIFEST",
+    "SEGMENT_APPROACH",
+    "SEGMENT_RETRACT",
     "Labels",
     "Trace",
     "TraceFormatError",

@@ -97,6 +97,24 @@ def finite_array(
     return view
 
 
+def segment_array(name: str, value: Any, n_samples: int) -> NDArray[np.int8]:
+    """Return ``value`` as a read-only int8 array of shape (n_samples,) holding only 0 and 1."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iub" and not (
+        arr.dtype.kind == "f" and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr))
+    ):
+        raise ValueError(f"{name} must hold integers 0 (approach) or 1 (retraction), "
+                         f"got dtype {arr.dtype}")
+    if arr.shape != (n_samples,):
+        raise ValueError(f"{name} must have shape (n,) = ({n_samples},), got shape {arr.shape}")
+    if not np.all((arr == 0) | (arr == 1)):
+        raise ValueError(f"{name} must hold only 0 (approach) and 1 (retraction), "
+                         f"found {sorted(set(np.unique(arr).tolist()) - {0, 1})[:5]}")
+    out = arr.astype(np.int8)
+    out.flags.writeable = False
+    return out
+
+
 def count(name: str, value: Any, *, minimum: int) -> int:
     """Return ``value`` as an int >= ``minimum`` (bools are rejected)."""
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < minimum:

@@ -17,10 +17,15 @@ REQUIRED_ATTRS: Final = (
 )
 #: Required entries that are an attribute (a number) or a dataset (an array).
 ATTR_OR_DATASET: Final = ("drive_frequency_hz", "gap_m")
-#: Optional entries that are datasets.
-OPTIONAL_DATASETS: Final = ("free_deflection_m",)
+#: Optional entries that are an attribute (a number) or a dataset (one value per row).
+OPTIONAL_ATTR_OR_DATASET: Final = ("drive_phase_rad",)
+#: Optional entries that are datasets (``segment`` is int8; the lock-in curves are float64).
+OPTIONAL_DATASETS: Final = ("free_deflection_m", "segment", "amplitude_m", "phase_rad", "z_piezo_m")
+#: Datasets whose presence makes ``deflection_m`` optional (lock-in curves).
+LOCKIN_AMPLITUDE: Final = "amplitude_m"
 
 DEFLECTION: Final = "deflection_m"
+DRIVE_PHASE: Final = "drive_phase_rad"
 LABELS_GROUP: Final = "labels"
 LABELS_ARRAYS: Final = ("force_n", "modal_m")
 LABELS_ATTRS: Final = ("model", "effect")

@@ -77,6 +77,33 @@ class Labels:
             )
         check_scalar_shapes(self.scalars, shape)
 
+    def row(self, i: int) -> Labels:
+        """The labels of row ``i`` of a 2-D trace (per-row scalars reduced to their value).
+
+        Parameters
+        ----------
+        i : int
+            Row index, 0 <= i < n_points (the caller checks the range).
+
+        Returns
+        -------
+        Labels
+            ``force_n`` (n,), ``modal_m`` (n_modes, n); ``extra`` is shared unchanged.
+        """
+        if self.force_n.ndim != 2:
+            raise ValueError("labels.row needs the labels of a 2-D trace (one row per point)")
+        return Labels(
+            self.force_n[i],
+            modal_m=None if self.modal_m is None else self.modal_m[:, i],
+            model=self.model,
+            effect=self.effect,
+            scalars={
+                name: float(value[i]) if isinstance(value, np.ndarray) else value
+                for name, value in self.scalars.items()
+            },
+            extra=self.extra,
+        )
+
 
 def check_model(model: Any) -> dict[str, Any]:
     """Return ``model`` normalised through JSON; raise ``ValueError`` if it cannot be."""

@@ -24,13 +24,15 @@ from afmlearn.io._format import (
     FORMAT,
     LABELS_ARRAYS,
     LABELS_GROUP,
+    LOCKIN_AMPLITUDE,
+    OPTIONAL_ATTR_OR_DATASET,
     OPTIONAL_DATASETS,
     REQUIRED_ATTRS,
     SUPPORTED_VERSIONS,
 )
 from afmlearn.io.errors import TraceFormatError
 from afmlearn.io.labels import Labels
-from afmlearn.io.trace import METADATA_FIELDS, Trace, check_metadata
+from afmlearn.io.trace import METADATA_FIELDS, Trace, check_metadata, row_index, row_metadata
 
 __all__ = ["TraceReader", "read_rows", "read_trace"]
 
@@ -60,11 +62,12 @@ def read_trace(path: str | os.PathLike[str], *, labels: bool = False) -> Trace:
     """
     path = Path(path)
     with _open(path) as file:
-        deflection, metadata = _read_header(file, path)
+        deflection, shape, metadata = _read_header(file, path)
         truth = None
-        if labels and (group := _labels_group(file, path, deflection.shape)) is not None:
+        if labels and (group := _labels_group(file, path, shape)) is not None:
             truth = _read_labels(group, path, row=None)
-        return _checked(path, Trace, deflection[()], labels=truth, **metadata)
+        values = None if deflection is None else deflection[()]
+        return _checked(path, Trace, values, labels=truth, **metadata)
 
 
 @final
@@ -91,9 +94,10 @@ class TraceReader:
         self._path = Path(path)
         self._file = _open(self._path)
         try:
-            self._deflection, self._metadata = _read_header(self._file, self._path)
-            shape = self._deflection.shape
-            self._labels = _labels_group(self._file, self._path, shape) if labels else None
+            self._deflection, self._shape, self._metadata = _read_header(self._file, self._path)
+            self._labels = (
+                _labels_group(self._file, self._path, self._shape) if labels else None
+            )
         except BaseException:
             self._file.close()
             raise
@@ -105,18 +109,28 @@ class TraceReader:
 
     @property
     def shape(self) -> tuple[int, ...]:
-        """Shape of ``deflection_m``: (n,) or (n_points, n)."""
-        return self._deflection.shape
+        """Shape of ``deflection_m``: (n,) or (n_points, n) (of ``amplitude_m`` for curves)."""
+        return self._shape
+
+    @property
+    def has_rows(self) -> bool:
+        """True when ``deflection_m`` is 2-D (a sweep or a set-point series)."""
+        return len(self.shape) == 2
 
     @property
     def is_sweep(self) -> bool:
-        """True when the file holds a sweep (2-D ``deflection_m``)."""
-        return len(self.shape) == 2
+        """True when the file holds a sweep (2-D, one drive frequency per row)."""
+        return self.has_rows and np.ndim(self._metadata["drive_frequency_hz"]) == 1
+
+    @property
+    def is_series(self) -> bool:
+        """True when the file holds a set-point series (2-D, one rest gap per row)."""
+        return self.has_rows and np.shape(self._metadata["gap_m"]) == (self.shape[0],)
 
     @property
     def n_points(self) -> int:
         """Number of rows; 1 for a single trace."""
-        return self.shape[0] if self.is_sweep else 1
+        return self.shape[0] if self.has_rows else 1
 
     @property
     def n_samples(self) -> int:
@@ -146,21 +160,22 @@ class TraceReader:
         Returns
         -------
         Trace
-            ``deflection_m`` of shape (n,), ``drive_frequency_hz`` of that row [Hz], and the
-            row's labels if requested (array scalars reduced to that row's value).
+            ``deflection_m`` of shape (n,); ``drive_frequency_hz`` [Hz], ``gap_m`` [m] and
+            ``drive_phase_rad`` [rad] of that row; the row's labels if requested (array
+            scalars reduced to that row's value).
         """
-        if isinstance(i, bool) or not isinstance(i, int | np.integer):
-            raise ValueError(f"i must be an integer in [0, {self.n_points}), got {i!r}")
-        if not 0 <= i < self.n_points:
-            raise ValueError(f"i must be in [0, {self.n_points}), got {i}")
+        checked = row_index(i, self.n_points)
+        index = checked if self.has_rows else None
         metadata = dict(self._metadata)
-        index = int(i) if self.is_sweep else None
         if index is not None:
-            metadata["drive_frequency_hz"] = metadata["drive_frequency_hz"][index]
+            metadata = row_metadata(metadata, index, self.n_points)
         truth = None
         if self._labels is not None:
             truth = _read_labels(self._labels, self._path, row=index)
-        deflection = self._deflection[()] if index is None else self._deflection[index]
+        if self._deflection is None:
+            deflection = None
+        else:
+            deflection = self._deflection[()] if index is None else self._deflection[index]
         return _checked(self._path, Trace, deflection, labels=truth, **metadata)
 
     def close(self) -> None:
@@ -227,8 +242,14 @@ def _open(path: Path) -> h5py.File:
         raise TraceFormatError(f"{path}: not a readable HDF5 file ({err})") from err
 
 
-def _read_header(file: h5py.File, path: Path) -> tuple[h5py.Dataset, dict[str, Any]]:
-    """Check format, version and structure; return ``deflection_m`` (unread) and metadata."""
+def _read_header(
+    file: h5py.File, path: Path
+) -> tuple[h5py.Dataset | None, tuple[int, ...], dict[str, Any]]:
+    """Check format, version and structure.
+
+    Returns ``deflection_m`` (unread; None for lock-in curves without it), its shape (that of
+    ``amplitude_m`` when it is absent) and the validated metadata.
+    """
     fmt = _decode(file.attrs.get("format"))
     if fmt != FORMAT:
         raise TraceFormatError(f"{path}: attribute 'format' must be {FORMAT!r}, {_found(fmt)}")
@@ -242,18 +263,32 @@ def _read_header(file: h5py.File, path: Path) -> tuple[h5py.Dataset, dict[str, A
             f"{path}: attribute 'format_version' must be one of {SUPPORTED_VERSIONS}, "
             f"{_found(version)}"
         )
-    deflection = file.get(DEFLECTION)
-    if not isinstance(deflection, h5py.Dataset):
-        raise TraceFormatError(f"{path}: missing required dataset {DEFLECTION!r}")
-    if deflection.ndim not in (1, 2) or deflection.dtype.kind not in "iuf" or deflection.size == 0:
+    deflection = file.get(DEFLECTION) if DEFLECTION in file else None
+    if deflection is None and isinstance(file.get(LOCKIN_AMPLITUDE), h5py.Dataset):
+        shape: tuple[int, ...] = file[LOCKIN_AMPLITUDE].shape
+        if len(shape) != 1:
+            raise TraceFormatError(
+                f"{path}: dataset {LOCKIN_AMPLITUDE!r} must have shape (n,), found {shape}"
+            )
+    elif not isinstance(deflection, h5py.Dataset):
+        raise TraceFormatError(
+            f"{path}: missing required dataset {DEFLECTION!r} (optional only for lock-in "
+            f"curves with a dataset {LOCKIN_AMPLITUDE!r})"
+        )
+    elif (
+        deflection.ndim not in (1, 2) or deflection.dtype.kind not in "iuf" or deflection.size == 0
+    ):
         raise TraceFormatError(
             f"{path}: dataset {DEFLECTION!r} must be a non-empty real array of shape (n,) or "
             f"(n_points, n), found shape {deflection.shape} of dtype {deflection.dtype}"
         )
+    else:
+        shape = deflection.shape
     values: dict[str, Any] = {}
+    datasets = (*ATTR_OR_DATASET, *OPTIONAL_ATTR_OR_DATASET, *OPTIONAL_DATASETS)
     for name in METADATA_FIELDS:
         in_attrs = name in file.attrs
-        in_data = name in (*ATTR_OR_DATASET, *OPTIONAL_DATASETS) and name in file
+        in_data = name in datasets and name in file
         if in_attrs and in_data:
             raise TraceFormatError(f"{path}: {name!r} must be an attribute or a dataset, not both")
         if in_data:
@@ -267,7 +302,6 @@ def _read_header(file: h5py.File, path: Path) -> tuple[h5py.Dataset, dict[str, A
             raise TraceFormatError(f"{path}: missing required attribute {name!r}")
         elif name in ATTR_OR_DATASET:
             raise TraceFormatError(f"{path}: missing required attribute or dataset {name!r}")
-    shape = deflection.shape
     metadata = _checked(
         path,
         check_metadata,
@@ -275,7 +309,7 @@ def _read_header(file: h5py.File, path: Path) -> tuple[h5py.Dataset, dict[str, A
         n_samples=shape[-1],
         **values,
     )
-    return deflection, metadata
+    return deflection, shape, metadata
 
 
 def _labels_group(file: h5py.File, path: Path, shape: tuple[int, ...]) -> h5py.Group | None:

@@ -14,7 +14,14 @@ import numpy as np
 
 from afmlearn.io._atomic import temporary_sibling
 from afmlearn.io._checks import FloatArray, count, finite_array, finite_number
-from afmlearn.io._format import DEFLECTION, EXTRA_GROUP, FORMAT, FORMAT_VERSION, LABELS_GROUP
+from afmlearn.io._format import (
+    DEFLECTION,
+    DRIVE_PHASE,
+    EXTRA_GROUP,
+    FORMAT,
+    FORMAT_VERSION,
+    LABELS_GROUP,
+)
 from afmlearn.io.labels import (
     check_effect,
     check_extra,
@@ -32,7 +39,7 @@ _BLOCK = 1 << 16  # chunk length [samples] of single (1-D) traces
 
 @final
 class TraceWriter:
-    """Write one trace file a row (sweep) or a block of samples (single trace) at a time.
+    """Write one trace file a row (sweep, series) or a block of samples (1-D trace) at a time.
 
     The file is built in a hidden temporary file next to ``path``; datasets are chunked one
     row per chunk, so a 501 x 50,000 sweep is never held in memory. When the ``with`` block
@@ -46,7 +53,11 @@ class TraceWriter:
     n_samples : int
         Samples per row, n >= 1.
     n_points : int, optional
-        Rows of a sweep (deflection shape (n_points, n)); None for a single trace (n,).
+        Rows of a sweep or set-point series (deflection shape (n_points, n)); None for a 1-D
+        trace (n,).
+    deflection : bool, default True
+        False for lock-in curves without a deflection record: ``amplitude_m`` (n,) is then
+        required in ``metadata``, nothing is appended and no labels are allowed.
     n_modes : int, default 0
         Number of modal deflections stored in the labels (0: none).
     model : dict, optional
@@ -62,7 +73,9 @@ class TraceWriter:
         The keyword fields of `Trace` other than ``deflection_m`` and ``labels``:
         ``sample_rate_hz``, ``spring_constant_n_per_m``, ``quality_factor``,
         ``resonance_frequency_hz``, ``drive_frequency_hz`` (array of shape (n_points,) for a
-        sweep), ``gap_m`` (float or array of shape (n,)) are required; the others optional.
+        sweep), ``gap_m`` (float, array of shape (n,), or (n_points,) for a series) are
+        required; the others optional. ``drive_phase_rad`` may instead be given per row to
+        `write_row`.
 
     Examples
     --------
@@ -78,6 +91,7 @@ class TraceWriter:
         *,
         n_samples: int,
         n_points: int | None = None,
+        deflection: bool = True,
         n_modes: int = 0,
         model: Mapping[str, Any] | None = None,
         effect: str = "none",
@@ -95,6 +109,16 @@ class TraceWriter:
             n_points=self._n_points, n_samples=self._n_samples, **metadata
         )
         self._labelled = model is not None
+        self._deflection = bool(deflection)
+        if not self._deflection and (
+            self._n_points is not None
+            or self._metadata["amplitude_m"] is None
+            or self._labelled
+        ):
+            raise ValueError(
+                "deflection=False is for lock-in curves only: needs amplitude_m, a 1-D record "
+                "(n_points=None) and no labels (model=None)"
+            )
         if not self._labelled and (n_modes or scalars or extra or effect != "none"):
             raise ValueError(
                 "model is required (it marks a file with labels) when n_modes, effect, "
@@ -106,6 +130,7 @@ class TraceWriter:
         check_scalar_shapes(self._scalars, self._shape)
         self._extra = check_extra(extra or {})
         self._row_scalars: tuple[str, ...] | None = None
+        self._row_phase = False
         self._written = np.zeros(self._n_points or 0, dtype=bool)
         self._filled = 0
         self._tmp: Path | None = None
@@ -163,8 +188,9 @@ class TraceWriter:
         force_n: Any = None,
         modal_m: Any = None,
         scalars: Mapping[str, float] | None = None,
+        drive_phase_rad: float | None = None,
     ) -> None:
-        """Write row ``i`` of a sweep (rows may come in any order; rewriting replaces).
+        """Write row ``i`` of a sweep or series (rows in any order; rewriting replaces).
 
         Parameters
         ----------
@@ -179,6 +205,10 @@ class TraceWriter:
         scalars : dict of str to float, optional
             Per-row label scalars (e.g. ``dissipated_energy_j`` [J]); every row must name the
             same ones. Stored as datasets of shape (n_points,).
+        drive_phase_rad : float, optional
+            Drive phase at this row's first sample [rad] (design.md section 2), when it was not
+            given to the constructor; then every row must give it. Stored as a dataset of shape
+            (n_points,).
         """
         file = self._open_file()
         if self._n_points is None:
@@ -190,7 +220,10 @@ class TraceWriter:
         n = self._n_samples
         deflection, force, modal = self._check_block(deflection_m, force_n, modal_m, n)
         values = self._check_row_scalars(scalars)
+        phase = self._check_row_phase(drive_phase_rad)
         file[DEFLECTION][i] = deflection
+        if phase is not None:
+            file[DRIVE_PHASE][i] = phase
         if self._labelled:
             group = file[LABELS_GROUP]
             group["force_n"][i] = force
@@ -215,6 +248,8 @@ class TraceWriter:
         file = self._open_file()
         if self._n_points is not None:
             raise ValueError("append needs a single trace (n_points=None); use write_row instead")
+        if not self._deflection:
+            raise ValueError("append: this writer has no deflection record (deflection=False)")
         deflection, force, modal = self._check_block(deflection_m, force_n, modal_m, None)
         start, stop = self._filled, self._filled + deflection.shape[0]
         if stop > self._n_samples:
@@ -246,6 +281,8 @@ class TraceWriter:
                 file.attrs[name] = value
         shape = self._shape
         chunks = (1, shape[1]) if len(shape) == 2 else (min(shape[0], _BLOCK),)
+        if not self._deflection:
+            return
         file.create_dataset(DEFLECTION, shape, "f8", chunks=chunks, fillvalue=np.nan)
         if not self._labelled:
             return
@@ -314,7 +351,29 @@ class TraceWriter:
             )
         return values
 
+    def _check_row_phase(self, drive_phase_rad: Any) -> float | None:
+        given = drive_phase_rad is not None
+        if given and self._metadata["drive_phase_rad"] is not None:
+            raise ValueError(
+                "drive_phase_rad was already given to TraceWriter(...); do not repeat it per row"
+            )
+        if self._row_phase != given and np.any(self._written):
+            raise ValueError(
+                "drive_phase_rad must be given for every row or for none "
+                f"({'missing' if not given else 'unexpected'} in this row)"
+            )
+        if not given:
+            return None
+        value = finite_number("drive_phase_rad", drive_phase_rad)
+        if not self._row_phase:
+            self._open_file().create_dataset(DRIVE_PHASE, (self._n_points,), "f8",
+                                             fillvalue=np.nan)
+            self._row_phase = True
+        return value
+
     def _check_complete(self) -> None:
+        if not self._deflection:
+            return
         if self._n_points is None:
             if self._filled != self._n_samples:
                 raise ValueError(
@@ -337,7 +396,8 @@ def write_trace(trace: Trace, path: str | os.PathLike[str]) -> Path:
     Parameters
     ----------
     trace : Trace
-        The recording; a sweep is written one row per chunk so `read_rows` stays cheap.
+        The recording; a sweep or series is written one row per chunk so `read_rows` stays
+        cheap.
     path : str or os.PathLike
         Target file (``.h5``); an existing file is replaced.
 
@@ -361,11 +421,14 @@ def write_trace(trace: Trace, path: str | os.PathLike[str]) -> Path:
     with TraceWriter(
         path,
         n_samples=trace.n_samples,
-        n_points=trace.n_points if trace.is_sweep else None,
+        n_points=trace.n_points if trace.has_rows else None,
+        deflection=trace.deflection_m is not None,
         **label_args,
         **trace.metadata(),
     ) as writer:
-        if not trace.is_sweep:
+        if trace.deflection_m is None:
+            return Path(path)
+        if not trace.has_rows:
             writer.append(trace.deflection_m, force_n=force, modal_m=modal)
             return Path(path)
         for i in range(trace.n_points):

@@ -217,6 +217,6 @@ def test_unknown_entries_are_ignored(tmp_path: Path) -> None:
 
     def add(f: h5py.File) -> None:
         f.attrs["operator"] = "someone"
-        f["phase_rad"] = np.zeros(N)
+        f["temperature_k"] = np.full(N, 300.0)
 
     assert read_trace(build(tmp_path / "a.h5", add)).n_samples == N
