@@ -1,0 +1,192 @@
+"""Diagnosis on lock-in curves alone: which cause the baseline law misses, and the gain.
+
+Each hypothesis (``hypotheses.EXTENSIONS``) is fitted to the approach branch from the
+baseline's solution. Its evidence is the change of the Bayesian information criterion with a
+Gaussian likelihood of unknown variance, ``n ln(chi2_base / chi2_ext) - k ln n`` (``k`` extra
+parameters, ``n`` residuals); the gain is measured on data not fitted, the retraction branch:
+``1 - nrmse_ext / nrmse_base``. The cause named is the hypothesis with the largest evidence if
+that exceeds ``threshold`` and its held-out gain is positive, else ``none``; its confidence is
+its BIC weight among the baseline and the candidates.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any, final
+
+import numpy as np
+
+from afmlearn.metrics import nrmse
+from simulator.lockin import LockIn
+
+from .curve import Curve
+from .dissipation import dissipated_energy
+from .fit import CurveFitter
+from .hypotheses import EXTENSIONS, Hypothesis
+from .law import CurveLaw
+
+__all__ = ["CurveDiagnoser", "equation"]
+
+log = logging.getLogger(__name__)
+
+
+@final
+class CurveDiagnoser:
+    """Fit the baseline and every hypothesis to a curve; name the cause.
+
+    Parameters
+    ----------
+    hypotheses : sequence of Hypothesis
+        Candidate extensions (default: one per cause).
+    threshold : float
+        Smallest evidence (BIC units) for naming a cause (10: "very strong" on Kass and
+        Raftery's scale).
+    a0_m, tip_radius_m : float
+        Contact onset and nominal tip radius [m] (see :class:`CurveFitter`).
+    lockin : LockIn or None
+        The recording lock-in's filter.
+    max_nfev : int
+        Least-squares evaluations per extension fit.
+
+    Attributes
+    ----------
+    baseline_ : CurveFitter
+    fits_ : dict of str to CurveFitter
+        The fitted extension per cause.
+    candidates_ : list of dict
+        ``cause``, ``evidence`` (BIC units), ``gain`` (held-out), ``score`` (BIC weight).
+    cause_ : str
+    confidence_ : float
+    gain_ : float
+    """
+
+    def __init__(self, *, hypotheses: tuple[Hypothesis, ...] = EXTENSIONS,
+                 threshold: float = 10.0, a0_m: float = 0.3e-9, tip_radius_m: float = 10e-9,
+                 lockin: LockIn | None = None, max_nfev: int = 25) -> None:
+        if not all(isinstance(h, Hypothesis) for h in hypotheses):
+            raise ValueError("hypotheses must be Hypothesis objects")
+        if not (math.isfinite(threshold) and threshold >= 0.0):
+            raise ValueError(f"threshold must be a finite number >= 0, got {threshold!r}")
+        self.hypotheses = tuple(hypotheses)
+        self.threshold = float(threshold)
+        self.a0_m = a0_m
+        self.tip_radius_m = tip_radius_m
+        self.lockin = lockin
+        self.max_nfev = int(max_nfev)
+
+    def fit(self, curve: Curve) -> CurveDiagnoser:
+        """Fit on the approach (``segment == 0``), measure on the retraction."""
+        opts = {"a0_m": self.a0_m, "tip_radius_m": self.tip_radius_m, "lockin": self.lockin}
+        fit_mask = curve.segment == 0
+        held = curve.segment == 1
+        self.curve_ = curve
+        self.baseline_ = CurveFitter(**opts).fit(curve, mask=fit_mask)
+        b_chi2 = self.baseline_.chi2_
+        n = self.baseline_.n_fit_
+        b_held = heldout_nrmse(self.baseline_, curve, held)
+        self.fits_: dict[str, CurveFitter] = {}
+        cands = []
+        for h in self.hypotheses:
+            f = CurveFitter(hypothesis=h, start=self.baseline_.values_, max_nfev=self.max_nfev,
+                            **opts).fit(curve, mask=fit_mask)
+            # the extension nests the baseline: it can never fit worse than its start
+            chi2 = min(f.chi2_, b_chi2)
+            k = len(h.parameters)
+            evidence = n * math.log(b_chi2 / max(chi2, 1e-300)) - k * math.log(n)
+            e_held = heldout_nrmse(f, curve, held)
+            gain = 1.0 - e_held / b_held if b_held > 0 and np.any(held) else float("nan")
+            self.fits_[h.cause] = f
+            cands.append({"cause": h.cause, "evidence": float(evidence), "gain": float(gain),
+                          "heldout_nrmse": float(e_held), "chi2": float(chi2)})
+        ev = np.array([0.0] + [c["evidence"] for c in cands])
+        w = np.exp(0.5 * (ev - ev.max()))
+        w /= w.sum()
+        for c, wi in zip(cands, w[1:], strict=True):
+            c["score"] = float(wi)
+        cands.sort(key=lambda c: c["evidence"], reverse=True)
+        self.candidates_ = cands
+        best = cands[0] if cands else None
+        named = (best is not None and best["evidence"] > self.threshold
+                 and not (best["gain"] <= 0.0))
+        self.cause_ = best["cause"] if named else "none"
+        self.confidence_ = float(best["score"] if named else w[0])
+        self.gain_ = float(best["gain"]) if named else 0.0
+        self.baseline_heldout_ = float(b_held)
+        return self
+
+    @property
+    def extended_(self) -> CurveFitter:
+        """The fit of the named cause (the baseline when ``none``)."""
+        return self.fits_.get(self.cause_, self.baseline_)
+
+    def report(self) -> dict[str, Any]:
+        """``report.json`` (``design.md`` §3 keys) plus curve-specific fields."""
+        c = self.curve_
+        ext = self.extended_
+        e_j = self.dissipation()
+        app = c.segment == 0
+        return {
+            "cause": self.cause_,
+            "confidence": self.confidence_,
+            "baseline": {"equation": equation(self.baseline_.law_, c),
+                         "heldout_nrmse": self.baseline_heldout_,
+                         "chi2": self.baseline_.chi2_, "n_fit": self.baseline_.n_fit_,
+                         "parameters": self.baseline_.values_},
+            "extended": {"equation": equation(ext.law_, c),
+                         "heldout_nrmse": heldout_nrmse(ext, c, c.segment == 1),
+                         "parameters": ext.values_},
+            "gain": self.gain_,
+            "candidates": [{"cause": k["cause"], "gain": k["gain"], "score": k["score"],
+                            "evidence": f"delta BIC {k['evidence']:.1f}, held-out NRMSE "
+                                        f"{k['heldout_nrmse']:.4g}"}
+                           for k in self.candidates_],
+            "causes": ([{"cause": self.cause_, "gain": self.gain_,
+                         "evidence": self.candidates_[0]["evidence"]}]
+                       if self.cause_ != "none" else []),
+            "curve": {"free_amplitude_m": c.length_m, "n_points": c.n,
+                      "lockin_filter": self.lockin.to_dict() if self.lockin else None,
+                      "surface_offset_m": ext.offset_ * c.length_m,
+                      "omega": ext.values_["omega"],
+                      "dissipated_energy_ev_max": float(np.max(e_j[app])) / 1.602176634e-19,
+                      "adhesion_force_n": ext.law_.adhesion * c.force_unit_n},
+            "figures": [],
+        }
+
+    def dissipation(self) -> np.ndarray:
+        """Measured energy loss per cycle [J], shape (m,) (Cleveland/Anczykowski formula)."""
+        c = self.curve_
+        return dissipated_energy(c.amplitude, c.phase, free_amplitude=1.0,
+                                 free_phase=c.free_phase, quality_factor=c.quality_factor,
+                                 omega=self.extended_.values_["omega"],
+                                 spring_constant=1.0) * c.energy_unit_j
+
+
+def heldout_nrmse(fit: CurveFitter, curve: Curve, mask: np.ndarray) -> float:
+    """Mean of the amplitude and phase NRMSE (``design.md`` §4) on the points ``mask``."""
+    if not np.any(mask):
+        return float("nan")
+    a, p = fit.predict(curve)
+    dp = (p - curve.phase + np.pi) % (2 * np.pi) - np.pi
+    return 0.5 * (nrmse(a[mask], curve.amplitude[mask])
+                  + nrmse(curve.phase[mask] + dp[mask], curve.phase[mask]))
+
+
+def equation(law: CurveLaw, curve: Curve) -> str:
+    """The fitted law in SI: nN and nm."""
+    fu = curve.force_unit_n * 1e9
+    lu = curve.length_m * 1e9
+    a0 = law.a0 * lu
+    parts = [f"F = -{law.vdw * fu * lu**2:.4g}/z^2 (z > a0 = {a0:.3g} nm)",
+             f"-{law.adhesion * fu:.4g} + {law.stiffness * fu / lu**law.exponent:.4g} "
+             f"d^{law.exponent:.3g} (contact)"]
+    if law.visco:
+        parts.append(f"+ {law.visco * fu / lu**0.5:.4g} sqrt(d) d' (d' per unit omega0 t)")
+    if law.damping:
+        parts.append(f"- {law.damping * fu:.4g} exp(-z/{law.decay_length * lu:.3g}) z'")
+    if law.electrostatic:
+        parts.append(f"- {law.electrostatic * fu * lu**2:.4g}/(z (z + "
+                     f"{law.radius * lu:.3g}))")
+    if law.neck:
+        parts.append(f"neck to z = a0 + {law.neck * lu:.3g} nm on retraction")
+    return "; ".join(parts) + "  [nN, nm]"

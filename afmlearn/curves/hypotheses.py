@@ -1,0 +1,56 @@
+"""Candidate tip--sample laws for lock-in curves: the baseline and one extension per cause.
+
+A hypothesis is a cause name and the parameters it frees on top of the baseline (VdW--DMT
+sphere: attraction ``vdw`` and contact ``stiffness`` free, exponent 1.5, no dissipation). The
+same causes as ``design.md`` §3 where curves can show them, plus ``drift`` (the sample moving
+against the piezo during the ramp), which only curves show.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import final
+
+__all__ = ["Parameter", "Hypothesis", "BASELINE", "EXTENSIONS", "DRIFT"]
+
+#: pseudo-field of the drift rate of the rest gap (not a law term)
+DRIFT = "drift"
+
+
+@final
+@dataclass(frozen=True)
+class Parameter:
+    """One fitted parameter: a :class:`CurveLaw` field (or ``drift``), start and bounds.
+
+    ``log`` parameters are fitted as ``log10`` of the value (bounds are values, > 0).
+    """
+
+    field: str
+    init: float
+    low: float
+    high: float
+    log: bool = True
+
+
+@final
+@dataclass(frozen=True)
+class Hypothesis:
+    """A cause and the parameters it adds to the baseline."""
+
+    cause: str
+    parameters: tuple[Parameter, ...]
+
+
+#: the baseline's free law parameters (starts are replaced by the fitter's scan)
+BASELINE = Hypothesis("none", (Parameter("vdw", 1e-5, 1e-9, 1e-1),
+                               Parameter("stiffness", 10.0, 1e-2, 1e5)))
+
+EXTENSIONS: tuple[Hypothesis, ...] = (
+    Hypothesis("contact_geometry", (Parameter("exponent", 1.8, 1.0, 3.5, log=False),)),
+    Hypothesis("viscoelastic", (Parameter("visco", 0.05, 1e-5, 1e3),)),
+    Hypothesis("long_range_damping", (Parameter("damping", 1e-3, 1e-7, 1e1),
+                                      Parameter("decay_length", 0.1, 1e-3, 2.0))),
+    Hypothesis("electrostatic", (Parameter("electrostatic", 1e-4, 1e-9, 1e0),)),
+    Hypothesis("adhesion_hysteresis", (Parameter("neck", 0.01, 1e-5, 0.5),)),
+    Hypothesis(DRIFT, (Parameter(DRIFT, 0.0, -1e-4, 1e-4, log=False),)),
+)
