@@ -2,7 +2,7 @@
 
 ``hydra.sweeper.params`` (and sweep overrides on the command line) map a config path to one of
 
-- ``interval(a, b)`` -- a float (or, with two integer bounds, an integer) drawn in ``[a, b]``;
+- ``interval(a, b)`` -- a float drawn in ``[a, b]`` (``int(interval(a, b))``: an integer);
   ``tag(log, interval(a, b))`` draws it on a log scale,
 - ``range(start, stop[, step])`` -- integers (or floats) ``start, start + step, ... < stop``, as
   Python's ``range`` (``stop`` excluded); ``shuffle(range(...))`` makes them categorical,
@@ -77,7 +77,7 @@ def _distribution(override: Override) -> BaseDistribution:
                              "on range(...) (use tag(log, interval(a, b)) for a log scale)")
         values = list(override.sweep_iterator(transformer=Transformer.encode))
         if not values:
-            raise ValueError(f"hydra.sweeper.params.{name}: {override.get_value_element_as_str()} "
+            raise ValueError(f"hydra.sweeper.params.{name}: {override.input_line} "
                              "is empty")
         if value.shuffle:
             return CategoricalDistribution(values)
@@ -94,7 +94,7 @@ def _distribution(override: Override) -> BaseDistribution:
         lo, hi = value.start, value.end
         if lo is None or hi is None or not lo < hi:
             raise ValueError(f"hydra.sweeper.params.{name}: interval needs start < end, got "
-                             f"{override.get_value_element_as_str()}")
+                             f"{override.input_line}")
         if log and lo <= 0:
             raise ValueError(f"hydra.sweeper.params.{name}: tag(log, interval(a, b)) needs a > 0, "
                              f"got a = {lo}")
@@ -102,7 +102,7 @@ def _distribution(override: Override) -> BaseDistribution:
             return IntDistribution(lo, hi, log=log)
         return FloatDistribution(float(lo), float(hi), log=log)
     raise ValueError(f"hydra.sweeper.params.{name}: unsupported distribution "
-                     f"{override.get_value_element_as_str()!r} (supported: interval(a, b), "
+                     f"{override.input_line!r} (supported: interval(a, b), "
                      "tag(log, interval(a, b)), range(start, stop[, step]), choice(...))")
 
 
@@ -153,7 +153,7 @@ class SearchSpace:
                 distributions[key] = _distribution(override)
                 fixed.pop(key, None)
             else:
-                fixed[key] = override.input_line or f"{key}={override.get_value_element_as_str()}"
+                fixed[key] = str(override.input_line)
                 distributions.pop(key, None)
         return cls(distributions=distributions, fixed=tuple(fixed.values()))
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import final
@@ -126,7 +127,9 @@ def run_worker(study: optuna.Study, objective: Objective, *, n_trials: int,
     done = {TrialState.COMPLETE: 0, TrialState.PRUNED: 0, TrialState.FAIL: 0}
     seconds = 0.0
     while True:
-        fail_stale_trials(study)
+        with warnings.catch_warnings():  # "experimental" since Optuna 2.9; and we do not use
+            warnings.simplefilter("ignore")  # Study.optimize, which the heartbeat warns about
+            fail_stale_trials(study)
         finished, running = _counts(study)
         if finished >= n_trials:
             break
@@ -136,7 +139,9 @@ def run_worker(study: optuna.Study, objective: Objective, *, n_trials: int,
         if sampler_factory is not None:
             n_all = len(study.get_trials(deepcopy=False))
             study.sampler = sampler_factory(1_000_003 * worker_index + n_all)
-        trial = study.ask()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            trial = study.ask()
         storage.record_heartbeat(trial._trial_id)
         finished, running = _counts(study)
         rank = running.index(trial.number) if trial.number in running else len(running)
