@@ -127,7 +127,14 @@ class Experiment(Sequence[Trace]):
         ------
         TraceFormatError
             If the file breaks the format.
+        afmlearn.io.instruments.RecordingError
+            For an instrument file that cannot be read (instrument files are opened with
+            `afmlearn.io.instruments.open_traces`, one observation per curve).
         """
+        from afmlearn.io.instruments import is_instrument_file, open_traces  # lazy: no cycle
+
+        if is_instrument_file(path):
+            return cls(open_traces(path))
         with TraceReader(path, labels=labels) as reader:
             rows = [reader.row(i) for i in range(reader.n_points)]
             if reader.has_rows:

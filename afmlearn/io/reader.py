@@ -59,8 +59,15 @@ def read_trace(path: str | os.PathLike[str], *, labels: bool = False) -> Trace:
     ------
     TraceFormatError
         If the file is missing, not HDF5, or breaks the format.
+    afmlearn.io.instruments.RecordingError
+        For an instrument file (``.ibw``, ``.jpk-force``, ``.csv``, ``.npz`` ...), which is
+        handed to `afmlearn.io.instruments.open_trace` (calibration from the file only).
     """
     path = Path(path)
+    from afmlearn.io.instruments import is_instrument_file, open_trace  # lazy: no cycle
+
+    if is_instrument_file(path):
+        return open_trace(path)
     with _open(path) as file:
         deflection, shape, metadata = _read_header(file, path)
         truth = None

@@ -1,0 +1,71 @@
+"""Noise models of an averaged spectrum: the objective a spectrum fit minimises.
+
+`GammaLikelihood` is the right one: a periodogram bin of Gaussian data is ``E chi^2_2 / 2``;
+the mean of ``nu`` independent ones is Gamma distributed with shape ``nu`` and mean ``E``, so
+the negative log-likelihood is ``nu sum(P/E + ln E)`` (maximum likelihood; Whittle 1953;
+for AFM thermal spectra e.g. Hutter & Bechhoefer 1993 use least squares instead).
+`AmplitudeLeastSquares` is what a plain curve fit of the amplitude spectral density does
+(kept to compare, and to reproduce vendor fits).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import final
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["AmplitudeLeastSquares", "GammaLikelihood", "NoiseModel"]
+
+FloatArray = NDArray[np.float64]
+
+
+class NoiseModel(ABC):
+    """Objective and parameter covariance of a spectrum fit (hook: `_terms`)."""
+
+    @abstractmethod
+    def _terms(self, observed: FloatArray, expected: FloatArray,
+               n_averages: float) -> tuple[FloatArray, FloatArray]:
+        """Per-bin ``(objective terms, Fisher weights)``: the objective is their sum; the
+        Fisher information is ``J^T diag(weights) J`` for the Jacobian ``J = dE/dtheta``."""
+
+    def objective(self, observed: FloatArray, expected: FloatArray, n_averages: float) -> float:
+        """Value to minimise (a negative log-likelihood up to a constant)."""
+        return float(np.sum(self._terms(observed, expected, n_averages)[0]))
+
+    def covariance(self, jacobian: FloatArray, observed: FloatArray, expected: FloatArray,
+                   n_averages: float) -> FloatArray:
+        """Parameter covariance (inverse Fisher information), shape (p, p), for the
+        Jacobian ``dE/dtheta`` of shape (n_bins, p), bins taken as independent."""
+        weights = self._terms(observed, expected, n_averages)[1]
+        return np.linalg.inv(jacobian.T @ (weights[:, None] * jacobian))
+
+
+@final
+class GammaLikelihood(NoiseModel):
+    """Maximum likelihood for an average of ``n_averages`` independent periodograms."""
+
+    def _terms(self, observed: FloatArray, expected: FloatArray,
+               n_averages: float) -> tuple[FloatArray, FloatArray]:
+        return n_averages * (observed / expected + np.log(expected)), n_averages / expected**2
+
+    def __repr__(self) -> str:
+        return "GammaLikelihood()"
+
+
+@final
+class AmplitudeLeastSquares(NoiseModel):
+    """Unweighted least squares on ``sqrt(PSD)`` (a plain curve fit of the ASD); its
+    covariance uses the residual variance (Gauss-Newton)."""
+
+    def _terms(self, observed: FloatArray, expected: FloatArray,
+               n_averages: float) -> tuple[FloatArray, FloatArray]:
+        resid = np.sqrt(observed) - np.sqrt(expected)
+        scale = max(float(np.mean(observed)), 1e-300)  # fixed scale: objective O(1) per bin
+        sigma2 = max(float(np.mean(resid**2)), 1e-300)
+        # d sqrt(E)/dE = 1 / (2 sqrt(E)): Gauss-Newton weights on dE/dtheta
+        return resid**2 / scale, 1.0 / (4.0 * expected * sigma2)
+
+    def __repr__(self) -> str:
+        return "AmplitudeLeastSquares()"

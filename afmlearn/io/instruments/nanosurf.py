@@ -1,0 +1,95 @@
+"""Nanosurf ``.nid`` thermal-tune files (read with nsfopen): the thermal spectrum.
+
+The file holds the measured amplitude spectral density (group "Spectrum FFT", m/sqrt(Hz),
+equally spaced bins from 0 Hz) and the vendor's fitted curve ("Spectrum Fit"), with a header
+("DataSet-Info") stating the vendor's f0, Q, k, the number of averages, the bin width, the fit
+range and the lever temperature. A .nid thermal tune is not a trace: scripts/calibrate.py
+reads it (`afmlearn.calibrate.read_spectrum`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, final
+
+import numpy as np
+
+from afmlearn.io.instruments.base import InstrumentReader, Parsed
+from afmlearn.io.instruments.errors import RecordingError
+
+__all__ = ["NanosurfReader", "parse_quantity"]
+
+_PREFIX = {"f": 1e-15, "p": 1e-12, "n": 1e-9, "u": 1e-6, "µ": 1e-6, "m": 1e-3, "": 1.0,
+           "k": 1e3, "M": 1e6, "G": 1e9}
+
+
+@final
+class NanosurfReader(InstrumentReader):
+    """Nanosurf ``.nid`` thermal tune: arrays ``frequency_hz``, ``asd_m_per_rthz`` and
+    ``vendor_fit_asd_m_per_rthz``; header ``vendor_*`` values, ``temperature_k``,
+    ``n_averages``, ``fit_range_hz``."""
+
+    suffixes = (".nid",)
+    name = "a Nanosurf .nid file"
+
+    def _parse(self, path: Path, options: Mapping[str, Any]) -> Parsed:
+        from NSFopen.read import read
+
+        nid = read(str(path))
+        data, param = nid.data, nid.param
+        spectra = {key: np.asarray(data[key], dtype=float).ravel() for key in data.index}
+        measured = [v for k, v in spectra.items() if "FFT" in k and "Spectral" in k[-1]]
+        fitted = [v for k, v in spectra.items() if "Fit" in k and "Spectral" in k[-1]]
+        if not measured:
+            raise RecordingError(f"{path}: no thermal spectrum ('Spectrum FFT' amplitude "
+                                 f"spectral density) in this .nid; found {list(data.index)}")
+        asd = measured[0]
+        unit = str(param["Z"]["units"][0]) if "Z" in param else ""
+        if unit and unit.replace(" ", "") != "m/sqrt(Hz)":
+            raise RecordingError(f"{path}: spectrum in {unit!r}, expected m/sqrt(Hz) "
+                                 "(a deflection calibrated in metres)")
+        f_min = float(param["X"]["min"][0])
+        f_range = float(param["X"]["range"][0])
+        freq = np.linspace(f_min, f_min + f_range, asd.size)
+        info = dict(param["HeaderDump"].get("DataSet-Info", {}))
+        header: dict[str, Any] = {"description": f"Nanosurf thermal tune {path.name}",
+                                  "vendor_header": {str(k): str(v) for k, v in info.items()}}
+        for key, name in (("Frequency:", "vendor_resonance_frequency_hz"),
+                          ("Q Factor:", "vendor_quality_factor"),
+                          ("Spring Constant:", "vendor_spring_constant_n_per_m"),
+                          ("Averages", "n_averages"), ("Resolution", "bin_width_hz")):
+            value = parse_quantity(info.get(key))
+            if value is not None:
+                header[name] = value
+        lo, hi = parse_quantity(info.get("Peak fit min")), parse_quantity(info.get("Peak fit max"))
+        if lo is not None and hi is not None and hi > lo:
+            header["fit_range_hz"] = (lo, hi)
+        temp = info.get("Cantilever temperature")
+        if temp is not None and (t := parse_quantity(str(temp).split("°")[0].split("Â")[0]))\
+                is not None:
+            header["temperature_k"] = t + 273.15
+        arrays = {"frequency_hz": freq, "asd_m_per_rthz": asd}
+        if fitted:
+            arrays["vendor_fit_asd_m_per_rthz"] = fitted[0]
+        return Parsed("spectrum", arrays, header)
+
+
+def parse_quantity(text: Any) -> float | None:
+    """``"179.8kHz"`` -> 179800.0, ``"27.13 N/m"`` -> 27.13, ``"1000"`` -> 1000.0; else None."""
+    if text is None:
+        return None
+    match = re.match(r"\s*([-+]?\d*\.?\d+(?:[eE][-+]?\d+)?)\s*([fpnuµmkMG]?)", str(text))
+    if not match:
+        return None
+    value = float(match.group(1))
+    rest = str(text)[match.end(2):].strip()
+    prefix = match.group(2)
+    # a prefix only counts when a unit follows it ("27.13 N/m": no prefix; "1 m" is metres)
+    if prefix and not rest[:1].isalpha() and not rest.startswith("/"):
+        if prefix == "m" and not rest:
+            prefix = ""
+    value *= _PREFIX.get(prefix, 1.0)
+    return value if math.isfinite(value) else None
