@@ -15,7 +15,8 @@ Config contract (see ``conf/simulate.yaml``)
     a ``modes`` node with a ``_target_`` that builds the dimensionless
     :class:`simulator.Cantilever` (``Cantilever.rectangular`` or an explicit ``Cantilever``).
 ``force``, ``scenario``, ``sensor``, ``scales``
-    ``_target_`` nodes, instantiated recursively.
+    ``_target_`` nodes, instantiated recursively. A ``spectroscopy`` scenario may give its
+    rest gaps in metres (``scenario.gaps_m``), converted here with ``cantilever.gap_m``.
 ``excitation``
     ``_target_`` (an excitation class) plus ``free_amplitude_ratio`` (free tip amplitude /
     rest gap) or an explicit dimensionless ``amplitude``.
@@ -40,7 +41,7 @@ from typing import Any
 import numpy as np
 from hydra.errors import InstantiationException
 from hydra.utils import get_class, instantiate, to_absolute_path
-from omegaconf import DictConfig, ListConfig, OmegaConf
+from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 from tqdm.auto import tqdm
 
 from afmlearn.io import Labels, Trace, TraceWriter, shard_path, write_manifest, write_trace
@@ -63,7 +64,8 @@ from simulator.forces import (
     SphereVdW,
 )
 from simulator.labels import labels_to_si as si_labels
-from simulator.scenarios import AbstractScenario
+from simulator.labels import recorded_drive_phase
+from simulator.scenarios import AbstractScenario, Spectroscopy
 
 __all__ = ["simulate", "build", "si_labels", "REGIME_CODES", "EV"]
 
@@ -91,7 +93,8 @@ def simulate(cfg: DictConfig) -> tuple[dict[str, Any], dict[str, Any]]:
     Returns
     -------
     metrics : dict
-        ``amplitude_m`` [m] (first-harmonic amplitude; max over rows for a sweep),
+        ``amplitude_m`` [m] (first-harmonic amplitude; max over rows for a sweep or a
+        set-point series),
         ``free_amplitude_m`` [m], ``set_point`` [-] (amplitude / free amplitude),
         ``contact_fraction`` [-] (mean over rows for a sweep), ``dissipated_energy_j`` and
         ``dissipated_energy_ev`` (energy into the sample per drive cycle; mean over rows),
@@ -137,6 +140,10 @@ def simulate(cfg: DictConfig) -> tuple[dict[str, Any], dict[str, Any]]:
             result = None
             free = _run_free(obj, free_sc, bar)
             summary = _write_sweep(cfg, obj, path, free, bar)
+        elif isinstance(scenario, Spectroscopy):
+            result = scenario.run(system, progress=bar)
+            free = _run_free(obj, free_sc, bar)
+            summary = _write_series(cfg, obj, path, result, free)
         else:
             result = scenario.run(system, progress=bar)
             free = _run_free(obj, free_sc, bar)
@@ -199,7 +206,7 @@ def build(cfg: DictConfig) -> dict[str, Any]:
         raise ValueError(f"cantilever.n_modes must match the modes it builds "
                          f"({cantilever.n_modes}), got {n_modes}")
     force = _instantiate(cfg.force, "force", AbstractForceModel)
-    scenario = _instantiate(cfg.scenario, "scenario", AbstractScenario)
+    scenario = _instantiate(_scenario_node(cfg), "scenario", AbstractScenario)
     omega_ref = _reference_omega(scenario)
     excitation = _excitation(cfg.excitation, cantilever, omega_ref)
     free_amplitude = excitation.free_amplitude(cantilever, omega_ref)
@@ -356,6 +363,31 @@ def _instantiate(node: Any, key: str, kind: type) -> Any:
     return obj
 
 
+def _scenario_node(cfg: DictConfig) -> DictConfig:
+    """``cfg.scenario`` with ``gaps_m`` [m] (spectroscopy) converted to ``gaps`` [L_ref]."""
+    node = cfg.scenario
+    if not isinstance(node, DictConfig) or "gaps_m" not in node:
+        return node
+    gaps_m = node.get("gaps_m")
+    if isinstance(gaps_m, ListConfig):
+        gaps_m = OmegaConf.to_container(gaps_m, resolve=True)
+    node = copy.deepcopy(node)
+    with open_dict(node):
+        del node["gaps_m"]
+        if gaps_m is None:
+            return node
+        values = gaps_m if isinstance(gaps_m, list) else [gaps_m]
+        if not values or not all(_is_real(v) and v > 0 for v in values):
+            raise _range_error("scenario.gaps_m", "a non-empty list of rest gaps > 0 [m]",
+                               gaps_m)
+        if node.get("gaps") is not None:
+            raise ValueError("scenario.gaps_m and scenario.gaps are both given: give the rest "
+                             "gaps once (gaps_m in metres, or gaps in units of "
+                             "cantilever.gap_m)")
+        node["gaps"] = [float(v) / float(cfg.cantilever.gap_m) for v in values]
+    return node
+
+
 def _reference_omega(scenario: AbstractScenario) -> float:
     """Drive frequency at which the free amplitude is defined (f0 for a sweep across it)."""
     if isinstance(scenario, Sweep):
@@ -402,7 +434,10 @@ def _check_wall(force: AbstractForceModel, excitation: AbstractExcitation,
     """Attractive-only forces diverge at ``z = 0``: refuse free orbits that reach the sample."""
     if _has_wall(force):
         return
-    gap = min(float(getattr(scenario, g)) for g in ("gap", "gap_end") if hasattr(scenario, g))
+    gaps = [float(getattr(scenario, g)) for g in ("gap", "gap_end") if hasattr(scenario, g)]
+    if isinstance(scenario, Spectroscopy):
+        gaps.extend(scenario.rest_gaps(free_amplitude).tolist())
+    gap = min(gaps)
     reach = free_amplitude + excitation.gap_modulation
     if reach >= gap:
         raise ValueError(
@@ -579,6 +614,7 @@ def _write_single(cfg: DictConfig, obj: dict[str, Any], path: Path, result: Simu
     trace = Trace(
         deflection, sample_rate_hz=float(si["sample_rate_hz"]),
         drive_frequency_hz=float(si["drive_frequency_hz"]), gap_m=si["gap_m"],
+        drive_phase_rad=float(si["drive_phase_rad"]), segment=si["segment"],
         free_deflection_m=free_m, labels=labels, **_calibration(cfg, obj))
     write_trace(trace, path)
     return {
@@ -623,13 +659,51 @@ def _write_sweep(cfg: DictConfig, obj: dict[str, Any], path: Path,
             for key in ("amplitude_m", "contact_fraction", "dissipated_energy_j",
                         "peak_force_n", "coupling_strength"):
                 rows[key][point.row] = lab[key]
+            phase = recorded_drive_phase(float(point.phase[0]), system, point.omega)
             if cfg.labels:
                 writer.write_row(point.row, y, force_n=point.force * f_unit,
-                                 modal_m=point.q * ell, scalars=lab)
+                                 modal_m=point.q * ell, scalars=lab, drive_phase_rad=phase)
             else:
-                writer.write_row(point.row, y)
+                writer.write_row(point.row, y, drive_phase_rad=phase)
     return {
         "n_points": n_rows, "n_samples": n,
+        "amplitude_m": float(np.max(rows["amplitude_m"])),
+        "contact_fraction": float(np.mean(rows["contact_fraction"])),
+        "dissipated_energy_j": float(np.mean(rows["dissipated_energy_j"])),
+        "peak_force_n": float(np.max(rows["peak_force_n"])),
+        "coupling_strength": float(np.max(rows["coupling_strength"])),
+        "regime": collections.Counter(regimes).most_common(1)[0][0],
+    }
+
+
+def _write_series(cfg: DictConfig, obj: dict[str, Any], path: Path, result: SimulationResult,
+                  free: SimulationResult | None) -> dict[str, Any]:
+    """Write a set-point series: one row per rest gap, per-row labels and drive phases."""
+    scales: Scales = obj["scales"]
+    ell = scales.length
+    _check_trajectory(obj["force"], result.gap)
+    si = result.to_si(scales)
+    deflection = _measured(obj, result.deflection, result.dt)
+    free_m = _measured(obj, free.deflection, free.dt) if free is not None else None
+    lab = dict(si["labels"])
+    regimes = [str(r) for r in lab.pop("regime")]
+    rows = {k: np.asarray(v, dtype=float) for k, v in lab.items()}
+    rows["regime_code"] = np.array([float(REGIME_CODES.get(r, -1)) for r in regimes])
+    rows["peak_force_n"] = np.max(si["force_n"], axis=-1)
+    labels = None
+    if cfg.labels:
+        labels = Labels(
+            si["force_n"], modal_m=si["modal_m"], model=_model_json(cfg, obj), effect="none",
+            scalars=rows,
+            extra={"tip_sample_gap_m": result.gap * ell, "contact": result.contact.astype(float)})
+    trace = Trace(
+        deflection, sample_rate_hz=float(si["sample_rate_hz"]),
+        drive_frequency_hz=float(si["drive_frequency_hz"]), gap_m=result.rest_gap[:, 0] * ell,
+        drive_phase_rad=si["drive_phase_rad"], free_deflection_m=free_m, labels=labels,
+        **_calibration(cfg, obj))
+    write_trace(trace, path)
+    return {
+        "n_points": trace.n_points, "n_samples": trace.n_samples,
         "amplitude_m": float(np.max(rows["amplitude_m"])),
         "contact_fraction": float(np.mean(rows["contact_fraction"])),
         "dissipated_energy_j": float(np.mean(rows["dissipated_energy_j"])),

@@ -12,6 +12,14 @@ Definitions (used everywhere in afmlearn):
   Lennard-Jones: the force turns repulsive on part of the orbit) or ``permanent_contact``.
 * ``amplitude``, ``phase``: first-harmonic amplitude and phase lag of the deflection relative
   to the drive phase (lock-in over the recorded span).
+* ``drive_energy``, ``damping_energy``: energy put in by the drive and lost to the
+  cantilever's own damping per drive cycle; in a steady state
+  ``drive_energy = damping_energy + dissipated_energy``.
+
+The recorded drive phase (trace attribute ``drive_phase_rad``, design.md section 2) is the
+phase of the drive written as ``cos(Omega tau + phase)``, positive towards the sample:
+``theta`` for a tip force ``B cos(theta)``, ``theta - pi/2`` for a base motion
+``y sin(theta)`` (:func:`recorded_drive_phase`).
 """
 
 from __future__ import annotations
@@ -24,8 +32,10 @@ from numpy.typing import NDArray
 
 from ._scales import Scales
 from .integrate.state import Segment
+from .system import System
 
-__all__ = ["segment_labels", "trace_labels", "labels_to_si", "coupling_strength", "lock_in"]
+__all__ = ["segment_labels", "trace_labels", "labels_to_si", "coupling_strength", "lock_in",
+           "recorded_drive_phase"]
 
 
 def lock_in(x: NDArray[np.float64], phase: NDArray[np.float64], harmonic: int = 1) -> complex:
@@ -38,6 +48,29 @@ def lock_in(x: NDArray[np.float64], phase: NDArray[np.float64], harmonic: int = 
         Drive phase ``theta`` at each sample.
     """
     return complex(2.0 * np.mean(x * np.exp(-1j * harmonic * phase)))
+
+
+def recorded_drive_phase(theta: float | NDArray[np.float64], system: System,
+                         omega: float) -> float | NDArray[np.float64]:
+    """Drive phase in the trace convention, wrapped to (-pi, pi].
+
+    The modal drive of the fundamental is ``c cos(theta) + s sin(theta) = r cos(theta - a)``
+    with ``a = atan2(s, c)`` (0 for a tip force, pi/2 for a base motion), so the drive is
+    ``cos(Omega tau + phase)`` with ``phase = theta - a`` at ``tau = 0``.
+
+    Parameters
+    ----------
+    theta : float or ndarray
+        Simulator drive phase ``theta`` at the sample(s) of interest [rad].
+    system : System
+        Supplies the excitation and the cantilever.
+    omega : float
+        Drive frequency ``Omega``.
+    """
+    c, s = system.excitation.modal_drive(system.cantilever, omega)
+    offset = math.atan2(float(s[0]), float(c[0])) if (c[0] or s[0]) else 0.0
+    wrapped = np.angle(np.exp(1j * (np.asarray(theta, dtype=float) - offset)))
+    return float(wrapped) if np.ndim(wrapped) == 0 else wrapped
 
 
 def coupling_strength(q: NDArray[np.float64]) -> float:
@@ -94,7 +127,10 @@ def trace_labels(*, q: NDArray[np.float64], force: NDArray[np.float64],
     else:
         regime = "repulsive"
     # lock-in over whole periods only
-    n_whole = int(math.floor(cycles) * (2.0 * math.pi / omega) / dt)
+    # (rounded: truncating 1999.9999 samples to 1999 left a partial period whose bias
+    # depended on the drive phase at the first sample)
+    spp = 2.0 * math.pi / (omega * dt)
+    n_whole = min(n, int(round(math.floor(n / spp + 1e-9) * spp)))
     sl = slice(0, n_whole if n_whole > 0 else n)
     if drive_cos is not None and drive_sin is not None:
         xs = x[sl]
@@ -104,6 +140,7 @@ def trace_labels(*, q: NDArray[np.float64], force: NDArray[np.float64],
     return {
         "dissipated_energy": float(work[3] / cycles) if cycles > 0 else 0.0,
         "drive_energy": float(work[0] / cycles) if cycles > 0 else 0.0,
+        "damping_energy": float(work[1] / cycles) if cycles > 0 else 0.0,
         "contact_fraction": cf,
         "coupling_strength": coupling_strength(q),
         "regime": regime,
@@ -120,6 +157,7 @@ def trace_labels(*, q: NDArray[np.float64], force: NDArray[np.float64],
 SI_LABELS: dict[str, tuple[str, str | None]] = {
     "dissipated_energy": ("dissipated_energy_j", "energy"),
     "drive_energy": ("drive_energy_j", "energy"),
+    "damping_energy": ("damping_energy_j", "energy"),
     "amplitude": ("amplitude_m", "length"),
     "mean_deflection": ("mean_deflection_m", "length"),
     "min_gap": ("min_gap_m", "length"),

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import KW_ONLY, dataclass, fields, replace
+from dataclasses import KW_ONLY, dataclass, fields
 from typing import Any, Literal, final
 
 import numpy as np
@@ -223,10 +223,6 @@ class Trace:
             **row_metadata(self.metadata(), index, self.n_points),
             labels=labels,
         )
-
-    def with_labels(self, labels: Labels | None) -> Trace:
-        """A copy with ``labels`` replaced (None: drop the truth)."""
-        return replace(self, labels=labels)
 
 
 METADATA_FIELDS: tuple[str, ...] = tuple(

@@ -1,11 +1,13 @@
-"""Measurement scenarios: steady state, transient step, approach ramp, frequency sweep."""
+"""Measurement scenarios: steady state, transient step, approach ramp, frequency sweep,
+dynamic spectroscopy (steady records at several rest gaps)."""
 
 from .approach import Approach
 from .base import AbstractScenario
 from .result import SimulationResult
+from .spectroscopy import Spectroscopy
 from .steady import SteadyState
 from .sweep import Sweep, SweepPoint
 from .transient import Transient
 
-__all__ = ["AbstractScenario", "Approach", "SimulationResult", "SteadyState", "Sweep",
-           "SweepPoint", "Transient"]
+__all__ = ["AbstractScenario", "Approach", "SimulationResult", "Spectroscopy", "SteadyState",
+           "Sweep", "SweepPoint", "Transient"]

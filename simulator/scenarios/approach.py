@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import final
+
+import numpy as np
 
 from ..forces.base import check_range
 from ..integrate.state import State
@@ -28,7 +31,8 @@ class Approach(AbstractScenario):
         Duration of the ramp in drive periods (the ramp must be slow compared with ``Q``
         periods for a quasi-static amplitude--distance curve).
     retract : bool
-        Append the reverse ramp (approach--retract cycle).
+        Append the reverse ramp (approach--retract cycle); the result's ``segment`` marks
+        the samples of each ramp (0 approach, 1 retraction).
     settle_periods : float or None
         As :class:`SteadyState`.
     """
@@ -65,4 +69,6 @@ class Approach(AbstractScenario):
                                             record_velocity=self.record_velocity))
         if progress is not None:
             progress(n * len(segs))
-        return as_result(system, self.name, segs, self.to_dict())
+        result = as_result(system, self.name, segs, self.to_dict())
+        segment = np.repeat(np.arange(len(segs), dtype=np.int8), n)
+        return dataclasses.replace(result, segment=segment)

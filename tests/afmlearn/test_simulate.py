@@ -13,7 +13,7 @@ import pytest
 from hydra.errors import MissingConfigException
 from omegaconf import OmegaConf
 
-from afmlearn.io import MANIFEST, TraceReader, iter_traces, read_trace
+from afmlearn.io import MANIFEST, Experiment, TraceReader, iter_traces, read_trace
 from afmlearn.simulate import REGIME_CODES, build, si_labels, simulate
 from simulator import SteadyState
 from simulator.forces import DMT, ForceSum, HystereticJKR, ViscoelasticDMT
@@ -38,7 +38,7 @@ DISSIPATIVE = {"dmt_visco", "dmt_expdamp", "jkr_hysteretic"}
 def test_config_groups_are_complete():
     assert set(FORCES) == {"lj", "dmt", "dmt_visco", "dmt_expdamp", "jkr", "jkr_hysteretic",
                            "electrostatic", "none", "dmt_cone", "vdw_sphere"}
-    assert set(SCENARIOS) == {"steady", "transient", "approach", "sweep"}
+    assert set(SCENARIOS) == {"steady", "transient", "approach", "sweep", "spectroscopy"}
     assert {"tapping", "nclr", "nclr_3mode", "soft_lj", "sweet_spot"} <= set(CANTILEVERS)
     assert set(SENSORS) == {"default", "realistic", "nonlinear_detector"}
 
@@ -64,8 +64,14 @@ def test_every_force_gives_a_sane_tapping_trace(force, run_sim):
         assert abs(metrics["dissipated_energy_ev"]) < 0.1
 
 
+#: a tiny set-point series (tests/afmlearn/conftest.py's TINY has the other scenarios)
+TINY_SPECTROSCOPY = ["scenario.n_periods=5", "scenario.settle_periods=10",
+                     "scenario.gap_ratios=[0.9,0.7,0.5]"]
+
+
 @pytest.mark.parametrize("scenario", SCENARIOS)
 def test_every_scenario_writes_a_valid_file(scenario, run_sim, tiny):
+    tiny = {"spectroscopy": TINY_SPECTROSCOPY, **tiny}
     metrics, obj = run_sim(f"scenario={scenario}", *tiny[scenario])
     path = Path(metrics["output"])
     trace = read_trace(path)
@@ -98,20 +104,34 @@ def test_every_scenario_writes_a_valid_file(scenario, run_sim, tiny):
             assert lab.scalars[name].shape == (6,)
         assert set(np.unique(lab.scalars["regime_code"])) <= set(REGIME_CODES.values())
         assert obj["result"] is None  # streamed, never held whole
+        assert np.shape(trace.drive_phase_rad) == (6,)
+    elif scenario == "spectroscopy":
+        assert trace.is_series and not trace.is_sweep and trace.n_points == 3
+        np.testing.assert_allclose(trace.gap_m, np.array([0.9, 0.7, 0.5]) * 15e-9)
+        assert trace.drive_frequency_hz == pytest.approx(259.9e3)
+        np.testing.assert_allclose(trace.drive_phase_rad, obj["result"].drive_phase)
+        for name in ("amplitude_m", "dissipated_energy_j", "drive_energy_j",
+                     "damping_energy_j", "regime_code", "peak_force_n"):
+            assert lab.scalars[name].shape == (3,)
+        assert lab.extra["tip_sample_gap_m"].shape == trace.deflection_m.shape
     else:
         assert not trace.is_sweep
         assert np.ndim(trace.drive_frequency_hz) == 0
         assert lab.scalars["regime"] in REGIME_CODES
         assert lab.extra["tip_sample_gap_m"].shape == trace.deflection_m.shape
+        assert trace.drive_phase_rad == pytest.approx(obj["result"].drive_phase)
     if scenario == "approach":  # the rest gap varies: a dataset
         assert np.shape(trace.gap_m) == trace.deflection_m.shape
         assert trace.gap_m[0] == pytest.approx(20e-9, rel=1e-3)
+        half = trace.n_samples // 2  # approach, then retraction (approach.yaml: retract)
+        np.testing.assert_array_equal(trace.segment, np.repeat(np.int8([0, 1]), half))
+        assert np.all(np.diff(trace.gap_m[:half]) < 0) and np.all(np.diff(trace.gap_m[half:]) > 0)
     elif scenario == "transient":  # the step in topography: a dataset too
         k = int(lab.scalars["step_index"])
         assert 0 < k < trace.n_samples
         assert lab.scalars["step_m"] == pytest.approx(-2e-9)
         np.testing.assert_allclose(trace.gap_m[[0, k - 1, k, -1]], [10e-9, 10e-9, 8e-9, 8e-9])
-    else:
+    elif scenario != "spectroscopy":
         assert trace.gap_m == pytest.approx(10e-9)
 
 
@@ -349,5 +369,56 @@ def test_script_rejects_bad_input(tmp_path):
          f"output={tmp_path / 'x.h5'}", f"hydra.run.dir={tmp_path / 'run'}"],
         cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True,
         text=True, timeout=600)
-    assert proc.returncode != 0
-    assert "noise.level must be a number in [0, 1]" in proc.stderr
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        "error: noise.level must be a number in [0, 1], got -1"]
+
+
+# ---------------------------------------------------------------------------- spectroscopy
+def test_spectroscopy_gaps_in_metres_or_reference_units(run_sim):
+    """scenario.gaps_m [m], scenario.gaps [L_ref] and gap_ratios give the same rows."""
+    common = ["scenario=spectroscopy", "scenario.n_periods=3", "scenario.settle_periods=5",
+              "noise.level=0"]
+    a, _ = run_sim(*common, "scenario.gaps_m=[12e-9,8e-9]", name="a.h5")
+    b, _ = run_sim(*common, "scenario.gaps=[1.2,0.8]", name="b.h5")
+    c, _ = run_sim(*common, "scenario.gap_ratios=[0.8,0.5333333333333333]", name="c.h5")
+    ta, tb, tc = (read_trace(m["output"]) for m in (a, b, c))
+    np.testing.assert_allclose(ta.gap_m, [12e-9, 8e-9])
+    np.testing.assert_allclose(tb.gap_m, ta.gap_m)
+    np.testing.assert_allclose(tc.gap_m, ta.gap_m, rtol=1e-12)
+    np.testing.assert_allclose(tb.deflection_m, ta.deflection_m, rtol=0, atol=1e-20)
+    np.testing.assert_allclose(tc.deflection_m, ta.deflection_m, rtol=1e-9, atol=1e-18)
+
+
+def test_spectroscopy_reads_as_an_experiment(run_sim):
+    """The file is a series: one observation per rest gap, with per-row labels."""
+    metrics, obj = run_sim("scenario=spectroscopy", "scenario.n_periods=5",
+                           "scenario.settle_periods=20", "scenario.gaps=[1.3,1.0,0.7]",
+                           "scenario.drive_phases=[0.3,-2.0,1.5]", "noise.level=0")
+    exp = Experiment.read(metrics["output"], labels=True)
+    assert exp.kind == "series" and len(exp) == 3
+    np.testing.assert_allclose(exp.gaps_m, [13e-9, 10e-9, 7e-9])
+    np.testing.assert_allclose(exp.drive_phases_rad, [0.3, -2.0, 1.5], atol=1e-9)
+    amplitudes = [obs.labels.scalars["amplitude_m"] for obs in exp]
+    assert amplitudes[0] > amplitudes[1] > amplitudes[2]  # tapping: the surface limits it
+    assert metrics["amplitude_m"] == pytest.approx(max(amplitudes))
+    for obs in exp:  # each row's labels belong to that row (no noise: equal sums)
+        np.testing.assert_allclose(obs.deflection_m, obs.labels.modal_m.sum(axis=0),
+                                   rtol=1e-12, atol=1e-22)
+
+
+@pytest.mark.parametrize(
+    ("overrides", "match"),
+    [
+        (["scenario.gaps_m=[1e-8,-1e-9]"], "scenario.gaps_m"),
+        (["scenario.gaps_m=[1e-8]", "scenario.gaps=[1.0]"], "scenario.gaps_m and"),
+        (["scenario.gaps=[1.0,0]"], "scenario: gaps"),
+        (["scenario.drive_phases=[0.0]"], "scenario: drive_phases"),
+        (["force=vdw_sphere", "scenario.gaps=[0.4]"], "free_amplitude_ratio"),
+    ],
+)
+def test_bad_spectroscopy_settings(tmp_path, compose_cfg, overrides, match):
+    cfg = compose_cfg(["scenario=spectroscopy", *TINY_SPECTROSCOPY,
+                       f"output={tmp_path / 'x.h5'}", *overrides])
+    with pytest.raises(ValueError, match=match):
+        simulate(cfg)

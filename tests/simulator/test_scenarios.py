@@ -17,7 +17,8 @@ from simulator import (
     Transient,
 )
 from simulator.forces import DMT, NoInteraction, ViscoelasticDMT
-from simulator.labels import lock_in
+from simulator.labels import lock_in, recorded_drive_phase
+from simulator.scenarios import Spectroscopy
 
 
 @pytest.fixture(scope="module")
@@ -138,6 +139,10 @@ def test_sweep_streaming_equals_run():
         (Sweep, {"omega_start": 1.2, "omega_stop": 1.0}, "omega_stop"),
         (Sweep, {"direction": "sideways"}, "direction"),
         (Sweep, {"n_points": 1}, "n_points"),
+        (Spectroscopy, {"gaps": [1.0, -0.5]}, "gaps"),
+        (Spectroscopy, {"gap_ratios": []}, "gap_ratios"),
+        (Spectroscopy, {"gaps": [1.0, 0.8], "drive_phases": [0.0]}, "drive_phases"),
+        (Spectroscopy, {"n_periods": -1}, "n_periods"),
     ],
 )
 def test_bad_settings_raise(cls, kwargs, name):
@@ -189,3 +194,112 @@ def test_no_drift_with_large_absolute_time(cl1):
         runs.append(seg)
     np.testing.assert_array_equal(runs[0].q, runs[1].q)
     assert runs[1].end.tau[0] == 1e6 + 20000 * (2 * np.pi / 200)
+
+
+# ---------------------------------------------------------------------------- spectroscopy
+SPECTRO = {"n_periods": 10, "settle_periods": 400, "samples_per_period": 200}
+
+
+def first_harmonic(x, phase0, omega, dt):
+    """Complex amplitude of ``x`` against ``cos(omega tau + phase0)`` over whole periods."""
+    spp = int(round(2 * np.pi / (omega * dt)))
+    n = (x.size // spp) * spp
+    return lock_in(x[:n], phase0 + omega * dt * np.arange(n))
+
+
+def test_spectroscopy_rows_are_steady_records_up_to_the_phase(cl1):
+    """Row i = SteadyState at gap g_i (same settling from the free orbit), shifted by the
+    drive phase: with a phase offset of k samples, row[j] = steady[j + k]."""
+    system = tapping(cl1)
+    gaps = [1.3, 0.9, 0.6]
+    shifts = [0, 7, 31]
+    steady = [SteadyState(gap=g, **SPECTRO).run(system) for g in gaps]
+    theta_s = float(steady[0].phase[0])
+    spp = SPECTRO["samples_per_period"]
+    phases = [theta_s + 2 * np.pi * k / spp for k in shifts]
+    r = Spectroscopy(gaps=gaps, drive_phases=phases, **SPECTRO).run(system)
+    assert r.q.shape == (3, 1, 10 * spp) and r.has_rows and not r.is_sweep
+    np.testing.assert_allclose(r.phase[:, 0], phases, atol=1e-9)
+    np.testing.assert_allclose(r.rest_gap[:, 0], gaps)
+    for i, (k, s) in enumerate(zip(shifts, steady, strict=True)):
+        row, ref = r.deflection[i], s.deflection
+        scale = np.ptp(ref)
+        diff = np.abs(row[: row.size - k] - ref[k:])
+        # what remains is the transient not yet settled after 400 periods; it still decays
+        # along the record
+        assert np.max(diff) < 5e-5 * scale
+        assert np.max(diff[-spp:]) < 1e-5 * scale
+        assert r.labels["amplitude"][i] == pytest.approx(s.labels["amplitude"], rel=1e-5)
+        assert r.labels["regime"][i] == s.labels["regime"] == "repulsive"
+    # without drive phases the rows are the steady runs exactly
+    plain = Spectroscopy(gaps=gaps[:1], **SPECTRO).run(system)
+    np.testing.assert_allclose(plain.deflection[0], steady[0].deflection, rtol=0, atol=1e-12)
+
+
+def test_spectroscopy_gap_ratios_scale_the_free_amplitude(cl1):
+    system = tapping(cl1, ratio=1.5)
+    sc = Spectroscopy(gap_ratios=[0.9, 0.5])
+    np.testing.assert_allclose(sc.rest_gaps(1.5), [1.35, 0.75])
+    assert sc.n_rows == 2
+    assert Spectroscopy(gaps=[1.0], gap_ratios=[0.9, 0.5]).n_rows == 1  # gaps win
+    r = Spectroscopy(gap_ratios=[0.9, 0.5], n_periods=2, settle_periods=5).run(system)
+    np.testing.assert_allclose(r.rest_gap[:, 0], [1.35, 0.75], rtol=1e-12)
+
+
+@pytest.mark.parametrize("omega", [0.99, 1.01])
+def test_spectroscopy_drive_phase_is_the_drives_phase(cl1, omega):
+    """Off resonance (lag far from pi/2): the lag of the deflection behind
+    cos(Omega tau + drive_phase) is the simulator's lock-in phase, and the drive's work per
+    cycle pi B A sin(lag) equals the drive-energy label."""
+    system = tapping(cl1)
+    rng = np.random.default_rng(3)
+    phases = rng.uniform(-np.pi, np.pi, 3)
+    r = Spectroscopy(omega=omega, gaps=[1.2, 0.9, 0.6], drive_phases=phases, **SPECTRO).run(
+        system)
+    recorded = r.drive_phase
+    np.testing.assert_allclose(np.exp(1j * recorded), np.exp(1j * phases), atol=1e-9)
+    b = system.excitation.amplitude
+    for i in range(3):
+        a1 = first_harmonic(r.deflection[i], recorded[i], omega, r.dt)
+        lag = -np.angle(a1)
+        assert np.exp(1j * lag) == pytest.approx(np.exp(1j * r.labels["phase"][i]), abs=1e-6)
+        work = np.pi * b * abs(a1) * np.sin(lag)
+        assert work == pytest.approx(r.labels["drive_energy"][i], rel=2e-3)
+
+
+def test_base_excitation_drive_phase_is_the_base_motion():
+    """Free base-driven oscillator: the deflection lags the base motion y cos(Omega tau +
+    drive_phase) by the linear oscillator's atan2(Omega/Q, 1 - Omega^2)."""
+    q_factor, omega = 50.0, 0.98
+    cl = Cantilever.rectangular(n_modes=1, quality_factor=q_factor)
+    system = System(cl, NoInteraction(), BaseExcitation(amplitude=0.01))
+    r = Spectroscopy(omega=omega, gaps=[1.0], drive_phases=[0.4], n_periods=10,
+                     settle_periods=0).run(system)
+    phase = r.drive_phase
+    assert phase[0] == pytest.approx(0.4 - np.pi / 2)
+    assert recorded_drive_phase(0.4, system, omega) == pytest.approx(0.4 - np.pi / 2)
+    lag = -np.angle(first_harmonic(r.deflection[0], phase[0], omega, r.dt))
+    assert lag == pytest.approx(np.arctan2(omega / q_factor, 1 - omega**2), abs=1e-6)
+
+
+@pytest.mark.parametrize("viscous", [False, True])
+def test_spectroscopy_physics_per_row(cl1, viscous):
+    """Repulsive branch: the amplitude shrinks with the gap; per row, the drive's energy
+    equals the cantilever's damping plus the energy into the sample (labels)."""
+    force = (ViscoelasticDMT(a0=0.2, vdw=0.002, stiffness=20.0, viscosity=2.0) if viscous
+             else DMT(a0=0.2, vdw=0.002, stiffness=20.0))
+    gaps = np.array([1.4, 1.2, 1.0, 0.8, 0.6])
+    r = Spectroscopy(gaps=gaps, **SPECTRO).run(tapping(cl1, force))
+    lab = r.labels
+    assert lab["regime"] == ["repulsive"] * 5
+    amp = np.asarray(lab["amplitude"])
+    assert np.all(np.diff(amp) < 0)
+    assert np.all(amp < gaps + 0.2)  # the surface (plus at most a0 of indentation) limits it
+    drive = np.asarray(lab["drive_energy"])
+    balance = drive - np.asarray(lab["damping_energy"]) - np.asarray(lab["dissipated_energy"])
+    assert np.all(np.abs(balance) < 2e-3 * drive)
+    loss = np.asarray(lab["dissipated_energy"])
+    if viscous:
+        assert np.all(loss > 1e-2 * drive)
+    else:
+        assert np.all(np.abs(loss) < 1e-4 * drive)
