@@ -96,7 +96,7 @@ class Trace:
     lockin_bandwidth_hz : float, optional
         Lock-in output bandwidth [Hz], > 0.
     labels : Labels, optional
-        Ground truth of a simulated trace.
+        Ground truth of a simulated trace (needs ``deflection_m``).
     """
 
     deflection_m: FloatArray | None
@@ -144,6 +144,9 @@ class Trace:
         if self.labels is not None:
             if not isinstance(self.labels, Labels):
                 raise ValueError(f"labels must be a Labels or None, got {self.labels!r}")
+            if self.deflection_m is None:
+                raise ValueError("labels need deflection_m (lock-in curves without a "
+                                 "deflection record carry no labels)")
             self.labels.check_shape(shape)
 
     @property

@@ -30,7 +30,7 @@ def _positive_values(name: str, values: Sequence[float]) -> NDArray[np.float64]:
     if arr.ndim != 1 or arr.size == 0:
         raise ValueError(f"{name} must be a non-empty list of numbers, got {values!r}")
     for v in arr:
-        check_range(name, v, low=0.0, low_open=True)
+        check_range(name, float(v), low=0.0, low_open=True)
     return arr
 
 

@@ -210,9 +210,11 @@ def test_ramp_and_curve_validation(ramp: Trace, changes: dict[str, Any], match: 
         Trace(ramp.deflection_m, **kwargs)
 
 
-def test_deflection_may_be_absent_only_for_curves(ramp: Trace) -> None:
+def test_deflection_may_be_absent_only_for_curves(ramp: Trace, curves: Trace) -> None:
     with pytest.raises(ValueError, match="deflection_m may be None only for lock-in curves"):
         Trace(None, **ramp.metadata())
+    with pytest.raises(ValueError, match="labels need deflection_m"):
+        Trace(None, **curves.metadata(), labels=Labels(np.zeros(N)))
 
 
 def _old_file(path: Path, *, rows: bool) -> Path:
