@@ -125,13 +125,29 @@ def test_calibration_keeps_optional_fields_only_when_equal(calibration: dict[str
     assert cal["free_amplitude_m"] == 1e-8 and "tip_radius_m" not in cal
 
 
-@pytest.mark.parametrize("kind", ["series", "single"])
+def any_kind(calibration: dict[str, Any], kind: str) -> Trace:
+    if kind == "series":
+        return series_trace(calibration)
+    if kind == "sweep":
+        return Trace(np.zeros((2, N)), **calibration, drive_frequency_hz=[2e5, 3e5], gap_m=5e-9)
+    if kind == "ramp":
+        return Trace(np.zeros(N), **calibration, drive_frequency_hz=3e5,
+                     gap_m=np.linspace(9e-9, 1e-9, N), segment=np.zeros(N, dtype=np.int8))
+    if kind == "curves":
+        return Trace(None, **calibration, drive_frequency_hz=3e5, gap_m=2e-9,
+                     amplitude_m=np.ones(N), phase_rad=np.ones(N))
+    return steady(calibration, 5e-9)
+
+
+@pytest.mark.parametrize("kind", ["series", "sweep", "single", "ramp", "curves"])
 def test_read_round_trip(tmp_path: Path, calibration: dict[str, Any], kind: str) -> None:
-    trace = series_trace(calibration) if kind == "series" else steady(calibration, 5e-9)
+    trace = any_kind(calibration, kind)
     path = write_trace(trace, tmp_path / "t.h5")
     exp = Experiment.read(path)
     assert exp.kind == kind and len(exp) == trace.n_points and not exp.has_labels
-    np.testing.assert_array_equal(exp.gaps_m, np.atleast_1d(trace.gap_m))
+    assert Experiment.from_trace(trace).kind == kind
+    expected = np.atleast_1d(trace.gap_m) if kind != "ramp" else [np.nan]
+    np.testing.assert_array_equal(exp.gaps_m, np.broadcast_to(expected, (len(exp),)))
     with_truth = Experiment.read(path, labels=True)
     assert with_truth.has_labels == (trace.labels is not None)
 
