@@ -155,14 +155,15 @@ def calibrate(trace: Trace, *, row: int | None = None) -> Calibrated:
     """
     if not isinstance(trace, Trace):
         raise ValueError(f"trace must be an afmlearn.io.Trace, got {type(trace).__name__}")
-    if trace.is_sweep:
+    if trace.has_rows:
         if row is None or isinstance(row, bool) or not isinstance(row, int | np.integer) \
                 or not 0 <= row < trace.n_points:
-            raise ValueError(f"row must be an integer in [0, {trace.n_points}) for a sweep, "
-                             f"got {row!r}")
+            raise ValueError(f"row must be an integer in [0, {trace.n_points}) for a sweep or "
+                             f"a set-point series, got {row!r}")
         row = int(row)
-        deflection = trace.deflection_m[row]
-        f_drive = float(trace.drive_frequency_hz[row])
+        trace = trace.row(row)
+        deflection = trace.deflection_m
+        f_drive = float(trace.drive_frequency_hz)
     else:
         if row not in (None, 0):
             raise ValueError(f"row must be None (or 0) for a single trace, got {row!r}")

@@ -96,11 +96,12 @@ def check_trace(trace: Trace, *, row: int | None = None, min_samples_per_period:
                                f"min {float(gap.min())!r} m")
     rows = range(trace.n_points) if row is None else [row]
     for r in rows:
-        if trace.is_sweep:
+        if trace.has_rows:
             if isinstance(r, bool) or not isinstance(r, int | np.integer) \
                     or not 0 <= r < trace.n_points:
                 raise ValueError(f"row must be an integer in [0, {trace.n_points}), got {r!r}")
-            x, f = trace.deflection_m[r], float(trace.drive_frequency_hz[r])
+            x, f = trace.deflection_m[r], float(np.atleast_1d(trace.drive_frequency_hz)[
+                r if np.ndim(trace.drive_frequency_hz) else 0])
             where = f"row {r}: "
         else:
             if r not in (None, 0):
@@ -218,9 +219,12 @@ def _longest_run(mask: np.ndarray) -> int:
 
 
 def checked_row(trace: Trace, row: int | None) -> int | None:
-    """``row`` validated for ``trace``: required (in range) for a sweep, None otherwise."""
-    if trace.is_sweep:
+    """``row`` validated for ``trace``: required (in range) for a sweep, optional for a set-point
+    series (None: every row, jointly), None for a single trace."""
+    if trace.has_rows:
         if row is None:
+            if trace.is_series:
+                return None
             raise ValueError(f"row: the trace is a sweep of {trace.n_points} rows; pass row=<i> "
                              f"with i in [0, {trace.n_points}) to choose the drive frequency")
         if isinstance(row, bool) or not isinstance(row, int | np.integer) \
