@@ -63,7 +63,7 @@ class CurveDiagnoser:
 
     def __init__(self, *, hypotheses: tuple[Hypothesis, ...] = EXTENSIONS,
                  threshold: float = 10.0, a0_m: float = 0.3e-9, tip_radius_m: float = 10e-9,
-                 lockin: LockIn | None = None, max_nfev: int = 25) -> None:
+                 lockin: LockIn | None = None, max_nfev: int = 12) -> None:
         if not all(isinstance(h, Hypothesis) for h in hypotheses):
             raise ValueError("hypotheses must be Hypothesis objects")
         if not (math.isfinite(threshold) and threshold >= 0.0):

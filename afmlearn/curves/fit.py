@@ -47,6 +47,8 @@ class CurveFitter:
         Function evaluations of the least-squares refinement.
     start : dict or None
         Starting values by field name (``offset``, law fields, ``drift``): a previous fit.
+    step : float
+        Time step of the slow flow (dimensionless; default two drive periods).
 
     Attributes
     ----------
@@ -69,7 +71,8 @@ class CurveFitter:
 
     def __init__(self, *, hypothesis: Hypothesis | None = None, a0_m: float = 0.3e-9,
                  tip_radius_m: float = 10e-9, lockin: LockIn | None = None,
-                 max_nfev: int = 60, start: dict | None = None) -> None:
+                 max_nfev: int = 60, start: dict | None = None,
+                 step: float = 4.0 * math.pi) -> None:
         if hypothesis is not None and not isinstance(hypothesis, Hypothesis):
             raise ValueError(f"hypothesis must be a Hypothesis, got {type(hypothesis).__name__}")
         for name, v in (("a0_m", a0_m), ("tip_radius_m", tip_radius_m)):
@@ -83,12 +86,15 @@ class CurveFitter:
         self.lockin = lockin
         self.max_nfev = int(max_nfev)
         self.start = start
+        if not (math.isfinite(float(step)) and float(step) > 0.0):
+            raise ValueError(f"step must be a finite number > 0, got {step!r}")
+        self.step = float(step)
 
     # ------------------------------------------------------------------ public API
     def fit(self, curve: Curve, *, mask: NDArray[np.bool_] | None = None) -> CurveFitter:
         """Fit on the points ``mask`` (default: the approach, ``segment == 0``)."""
         mask = curve.segment == 0 if mask is None else np.asarray(mask, dtype=bool)
-        self.model_ = SlowFlowModel.for_curve(curve, lockin=self.lockin)
+        self.model_ = SlowFlowModel.for_curve(curve, lockin=self.lockin, step=self.step)
         self.sigma_ = tuple(max(s, f) for s, f in zip(curve.noise(), _SIGMA_FLOOR, strict=True))
         self._curve, self._mask = curve, mask
         self._base = CurveLaw(a0=self.a0_m / curve.length_m,
