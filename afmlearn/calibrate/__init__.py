@@ -16,7 +16,12 @@ Public API
 """
 
 from afmlearn.calibrate.correction import ThermalCorrection
-from afmlearn.calibrate.noise import AmplitudeLeastSquares, GammaLikelihood, NoiseModel
+from afmlearn.calibrate.noise import (
+    AmplitudeLeastSquares,
+    GammaLikelihood,
+    NoiseModel,
+    PowerLeastSquares,
+)
 from afmlearn.calibrate.response import BinAverage, BinResponse, PointSample, WindowResponse
 from afmlearn.calibrate.spectrum import PowerSpectrum, welch_spectrum
 from afmlearn.calibrate.thermal import PARAMETERS, ThermalFit
@@ -31,6 +36,7 @@ __all__ = [
     "Hann",
     "NoiseModel",
     "PointSample",
+    "PowerLeastSquares",
     "PowerSpectrum",
     "Rectangular",
     "ThermalCorrection",

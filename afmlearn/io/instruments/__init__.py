@@ -7,6 +7,8 @@ Public API
     NPZ / plain HDF5 by the column convention of docs/recordings.md) with calibration.
 `ForceCurve`, `write_force_curve`, `read_force_curve`
     A static force curve (no drive) and its HDF5 file.
+`convert_recording`
+    Instrument file -> trace format v1 (or a force-curve file): what scripts/convert.py does.
 `RecordingError`
     The one-line error for unknown, damaged or uncalibrated files.
 `READERS`, `reader_for`, `is_instrument_file`, `InstrumentReader`, `Parsed`
@@ -17,6 +19,7 @@ Public API
 
 from afmlearn.io.instruments.base import READ_OPTIONS, InstrumentReader, Parsed
 from afmlearn.io.instruments.calibration import CALIBRATION_FIELDS, load_calibration
+from afmlearn.io.instruments.convert import convert_recording
 from afmlearn.io.instruments.errors import RecordingError
 from afmlearn.io.instruments.force_curve import ForceCurve, read_force_curve, write_force_curve
 from afmlearn.io.instruments.registry import (
@@ -36,6 +39,7 @@ __all__ = [
     "InstrumentReader",
     "Parsed",
     "RecordingError",
+    "convert_recording",
     "is_instrument_file",
     "load_calibration",
     "open_recording",
