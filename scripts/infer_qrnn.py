@@ -5,9 +5,11 @@ Examples
     python scripts/infer_qrnn.py trace=outputs/demo/sweep_dmt.h5 out_dir=outputs/infer
     python scripts/infer_qrnn.py trace=run.h5 out_dir=out checkpoint=path/to/last.ckpt
 
-Writes <out_dir>/coupling.json and figures (see afmlearn.qrnn.infer.infer). Bad input (missing
-or malformed file, NaN samples, fewer than 20 samples per drive period, a trace shorter than one
-input period plus the forecast horizon) prints `error: ...` and exits with status 2.
+Writes <out_dir>/coupling.json and figures (see afmlearn.qrnn.infer.infer). Bad input (the
+checks of identify and diagnose -- clipped / saturated signal, NaN samples, fewer than 20
+samples per drive period, non-positive rest gap -- a missing or malformed file, a trace shorter
+than one input period plus the forecast horizon) prints one line `error: ...` and exits with
+status 2.
 """
 
 from __future__ import annotations

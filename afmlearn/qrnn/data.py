@@ -337,7 +337,8 @@ def windows_from_trace(trace: Trace | str | os.PathLike[str], *, samples_per_per
     if not np.all(np.isfinite(defl)):
         raise ValueError("deflection_m must be finite, found NaN/inf")
     n = defl.shape[1]
-    f_drive = np.atleast_1d(np.asarray(trace.drive_frequency_hz, dtype=float))
+    f_drive = np.broadcast_to(np.atleast_1d(np.asarray(trace.drive_frequency_hz, dtype=float)),
+                              (defl.shape[0],))
     omega_rows = f_drive / trace.resonance_frequency_hz
     gap = np.asarray(trace.gap_m, dtype=float)
     n_win = 1 + horizon
@@ -356,8 +357,12 @@ def windows_from_trace(trace: Trace | str | os.PathLike[str], *, samples_per_per
                 f"deflection_m: rows of {n} samples are too short; one input period plus "
                 f"horizon={horizon} periods need {math.ceil(n_win * period) + 1} samples")
         starts = np.arange(0.0, room + 1e-9, stride * period)
-        g = (np.full(starts.size, float(gap)) if gap.ndim == 0
-             else np.interp(starts, np.arange(n), gap))
+        if gap.ndim == 0:
+            g = np.full(starts.size, float(gap))
+        elif trace.is_series:                    # one rest gap per set-point (row)
+            g = np.full(starts.size, float(gap[r]))
+        else:                                    # a ramp: the gap at the window start
+            g = np.interp(starts, np.arange(n), gap)
         if np.any(g <= 0):
             raise ValueError("gap_m must be > 0 to scale the amplitude channel, got "
                              f"min {float(np.min(g))!r}")

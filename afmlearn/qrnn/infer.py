@@ -18,8 +18,10 @@ figures (``figures=True``)
     sweet-spot score vs drive frequency with the interval shaded).
 
 Bad input raises ``ValueError`` (files breaking the format: ``TraceFormatError``, a
-``ValueError``) with a message naming the problem: fewer than 20 samples per drive period, a row
-shorter than one input period plus the horizon, NaN / inf samples, a missing file.
+``ValueError``) with a message naming the problem. The checks are those of ``identify`` and
+``diagnose`` (:func:`afmlearn.preprocess.checks.check_trace`: clipped / saturated signal, NaN /
+inf samples, fewer than 20 samples per drive period, a non-positive rest gap) plus a row shorter
+than one input period plus the horizon and a missing file.
 
 The shipped checkpoint :data:`DEFAULT_CHECKPOINT` is used unless ``checkpoint`` is given; any
 checkpoint written by :func:`afmlearn.qrnn.train.train` (``last.ckpt``, the best one, or an
@@ -39,6 +41,7 @@ import torch
 from hydra.utils import instantiate
 
 from afmlearn.io import Trace, read_trace
+from afmlearn.preprocess.checks import check_trace
 from afmlearn.qrnn.coupling import directions, sweet_spot_interval, trace_scores
 from afmlearn.qrnn.data import windows_from_trace
 from afmlearn.qrnn.evaluate import nrmse_per_period
@@ -129,6 +132,12 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
         raise ValueError(f"threshold must be in (0, 1), got {threshold!r}")
     if not isinstance(trace, Trace):
         trace = read_trace(trace)          # labels=False: /labels is never opened
+    if trace.deflection_m is None:
+        raise ValueError("deflection_m: the trace holds lock-in curves (amplitude/phase) only; "
+                         "the QRNN needs the deflection record")
+    # the same refusals as identify / diagnose: clipped (saturated) signal, NaN/inf, too few
+    # samples per drive period, non-positive rest gap (afmlearn.preprocess.checks)
+    check_trace(trace)
     p, horizon = int(run["samples_per_period"]), int(run["horizon"])
     win = windows_from_trace(trace, samples_per_period=p, horizon=horizon)
     out = module.predict_windows(torch.from_numpy(np.ascontiguousarray(win["x"])))

@@ -82,9 +82,10 @@ def test_infer_single_trace_and_summary(tiny_run, tmp_path):
 
 
 @pytest.mark.parametrize("kind, message", [
-    ("short", "too short"),
+    ("short", "too short|spans"),
     ("undersampled", "samples per drive period"),
-    ("nan", "finite"),
+    ("nan", "finite|NaN"),
+    ("clipped", "clipped"),
 ])
 def test_bad_inputs_fail_clearly(tiny_run, tmp_path, kind, message):
     path = tmp_path / f"{kind}.h5"
@@ -92,6 +93,10 @@ def test_bad_inputs_fail_clearly(tiny_run, tmp_path, kind, message):
         write_trace(_sweep(n=64 * 2), path)                   # 2 periods < 1 + horizon + 1
     elif kind == "undersampled":
         write_trace(_sweep(fs=12 * F0, n=400), path)          # 12 samples per period
+    elif kind == "clipped":                                   # detector saturated at 90 %
+        sweep = _sweep()
+        top = 0.9 * sweep.deflection_m.max()
+        write_trace(Trace(np.minimum(sweep.deflection_m, top), **sweep.metadata()), path)
     else:
         write_trace(_sweep(), path)
         with h5py.File(path, "a") as fh:
@@ -134,3 +139,23 @@ def test_shipped_checkpoint_is_small_and_works(tmp_path):
     res = infer(tmp_path / "s.h5", tmp_path / "out", figures=False)
     assert res["checkpoint"] == str(DEFAULT_CHECKPOINT.resolve())
     assert all(0.0 <= t["score"] <= 1.0 for t in res["traces"])
+
+
+def test_cli_refuses_a_clipped_trace_with_one_line(tiny_run, tmp_path, monkeypatch, capsys):
+    """scripts/infer_qrnn.py applies the identify/diagnose input checks: exit 2, one line."""
+    import runpy
+
+    sweep = _sweep()
+    clipped = Trace(np.clip(sweep.deflection_m, -np.inf, 0.9 * sweep.deflection_m.max()),
+                    **sweep.metadata())
+    path = write_trace(clipped, tmp_path / "clipped.h5")
+    monkeypatch.setattr(sys, "argv", [str(ROOT / "scripts" / "infer_qrnn.py"), f"trace={path}",
+                                      f"out_dir={tmp_path / 'out'}",
+                                      f"checkpoint={tiny_run['checkpoint']}",
+                                      "hydra.output_subdir=null"])
+    with pytest.raises(SystemExit) as exc:
+        runpy.run_path(str(ROOT / "scripts" / "infer_qrnn.py"), run_name="__main__")
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exc.value.code == 2
+    assert len(err) == 1 and err[0].startswith("error:") and "clipped" in err[0]
+    assert not (tmp_path / "out" / "coupling.json").exists()
