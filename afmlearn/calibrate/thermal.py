@@ -139,12 +139,16 @@ class ThermalFit:
             return noise.objective(p, e, n_avg)
 
         u = np.zeros(4)
-        for method in ("Nelder-Mead", "BFGS"):
-            res = minimize(objective, u, method=method,
-                           options={"xatol": 1e-9, "fatol": 1e-9, "maxiter": 4000}
-                           if method == "Nelder-Mead" else {"gtol": 1e-6})
-            if np.isfinite(res.fun):
-                u = res.x
+        if not isinstance(response, PointSample):
+            # warm start: the point-sampled model is ~20x cheaper and lands next to the optimum
+            def point(v: FloatArray) -> float:
+                f0, q, k, b = theta0 * np.exp(v)
+                dc = dc_level(f0, q, k, temperature, factor)
+                e = sho_psd(f, f0, q, dc) + b
+                return noise.objective(p, e, n_avg) if np.all(e > 0) else math.inf
+
+            u = _optimise(point, u)
+        u = _optimise(objective, u, polish=not isinstance(response, PointSample))
         e = expected(u)
         jac = _jacobian(expected, u, e)
         inflation = variance_inflation(response.window, response.segment_length) \
@@ -249,6 +253,23 @@ def _first_estimate(f: FloatArray, p: FloatArray) -> dict[str, float]:
     width = max((j1 - j0 + 1) * df, df)
     return {"f0": float(f[i]), "q": max(float(f[i]) / width, 1.0), "peak": peak,
             "background": max(background, peak * 1e-6)}
+
+
+def _optimise(objective, u0: FloatArray, *, polish: bool = False) -> FloatArray:
+    """Minimise a negative log-likelihood over log parameters: Nelder-Mead from ``u0``
+    (a small simplex when ``polish``: ``u0`` is already close), then BFGS. Tolerances are
+    absolute on the objective: 1e-4 is far below the 0.5 of one standard deviation."""
+    step = 0.01 if polish else 0.2
+    simplex = np.vstack([u0, u0 + step * np.eye(u0.size)])
+    res = minimize(objective, u0, method="Nelder-Mead",
+                   options={"initial_simplex": simplex, "xatol": 1e-8, "fatol": 1e-4,
+                            "maxiter": 4000, "maxfev": 4000})
+    u = res.x if np.isfinite(res.fun) else u0
+    if not polish:
+        res = minimize(objective, u, method="BFGS", options={"gtol": 1e-3, "maxiter": 200})
+        if np.isfinite(res.fun) and res.fun <= objective(u):
+            u = res.x
+    return u
 
 
 def _jacobian(fun, u: FloatArray, e0: FloatArray, step: float = 1e-6) -> FloatArray:

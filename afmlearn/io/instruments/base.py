@@ -9,9 +9,11 @@ curves) or a `ForceCurve` (static curves); any failure becomes one `RecordingErr
 
 from __future__ import annotations
 
+import logging
 import os
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, final
@@ -28,6 +30,7 @@ __all__ = ["READ_OPTIONS", "InstrumentReader", "Parsed"]
 #: Overrides that steer reading rather than calibrate (column / dataset name and its unit).
 READ_OPTIONS: tuple[str, ...] = ("column", "unit", "invols_m_per_v")
 
+_PARSER_LOGGERS = ("igor2", "afmformats", "NSFopen", "jprops", "h5py")
 Kind = Literal["deflection", "lockin", "force_curve", "spectrum"]
 _TRACE_REQUIRED = ("sample_rate_hz", "spring_constant_n_per_m", "quality_factor",
                    "resonance_frequency_hz", "drive_frequency_hz")
@@ -79,7 +82,8 @@ class InstrumentReader(ABC):
         if path.stat().st_size == 0:
             raise RecordingError(f"{path}: empty file")
         try:
-            parsed = self._parse(path, options)
+            with _quiet_parsers():
+                parsed = self._parse(path, options)
             parsed = parsed if isinstance(parsed, list) else [parsed]
             if not parsed:
                 raise RecordingError(f"{path}: no curve or record found")
@@ -132,6 +136,21 @@ class InstrumentReader(ABC):
             raise
         except ValueError as err:
             raise RecordingError(f"{path}: {err}") from None
+
+
+@contextmanager
+def _quiet_parsers() -> Iterator[None]:
+    """Silence the parsers' own loggers (igor2 logs a damaged wave's raw bytes at ERROR
+    level): the caller gets one `RecordingError` line instead."""
+    loggers = [logging.getLogger(name) for name in _PARSER_LOGGERS]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, levels, strict=True):
+            lg.setLevel(level)
 
 
 def _trace(parsed: Parsed, values: dict[str, Any], path: Path) -> Trace:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, final
@@ -38,7 +39,9 @@ class NanosurfReader(InstrumentReader):
     def _parse(self, path: Path, options: Mapping[str, Any]) -> Parsed:
         from NSFopen.read import read
 
-        nid = read(str(path))
+        with warnings.catch_warnings():  # nsfopen calls a pandas API deprecated in pandas 3
+            warnings.simplefilter("ignore")
+            nid = read(str(path))
         data, param = nid.data, nid.param
         spectra = {key: np.asarray(data[key], dtype=float).ravel() for key in data.index}
         measured = [v for k, v in spectra.items() if "FFT" in k and "Spectral" in k[-1]]
