@@ -31,9 +31,9 @@ def cycle_average(d, a, n=4000):
     return np.mean(morse(d[:, None] - a[:, None] * np.cos(th)) * np.cos(th), axis=1)
 
 
-def synthetic(amplitude):
+def synthetic(amplitude, n=200):
     """(gap, amplitude, phase) whose virial is that of ``morse`` at every point."""
-    dmin = np.linspace(0.005, 0.4, 200)
+    dmin = np.linspace(0.005, 0.4, n)
     a = np.full_like(dmin, amplitude) * (1.0 + 0.3 * dmin)  # amplitude varies along the ramp
     d = dmin + a
     v = cycle_average(d, a)
@@ -59,10 +59,22 @@ def test_sader_jarvis_katan_recovers_the_force(amplitude):
 def test_hoelscher_exact_for_large_amplitudes_only():
     errs = []
     for amplitude in (0.05, 2.0):
-        d, a, ph = synthetic(amplitude)
-        dd, f = hoelscher(d, a, ph, omega=1.0, drive=B)
+        d, a, ph = synthetic(amplitude, n=400)
+        dd, f = hoelscher(d, a, ph, omega=1.0, drive=B, n_bins=None)
         truth = morse(dd)
         keep = dd < 0.25
         errs.append(np.max(np.abs(f[keep] - truth[keep])) / np.ptp(truth[keep]))
     assert errs[1] < 0.05  # A / range = 40: the Abel relation holds
     assert errs[0] > 2 * errs[1]  # A ~ range: the large-amplitude limit fails
+
+
+def test_binning_puts_scattered_turning_points_on_a_grid():
+    d, a, ph = synthetic(0.5, n=400)
+    rng = np.random.default_rng(0)
+    jitter = a * (1.0 + 2e-3 * rng.standard_normal(a.size))  # noise moves the turning points
+    dd, f = sader_jarvis_katan(d, jitter, ph, omega=1.0, drive=B, n_bins=60)
+    assert np.all(np.diff(dd) > 0) and dd.size <= 60
+    keep = dd < 0.25
+    truth = morse(dd)
+    err = np.sqrt(np.mean((f[keep] - truth[keep]) ** 2)) / np.ptp(truth[keep])
+    assert err < 0.1
