@@ -133,3 +133,25 @@ def test_gamma_likelihood_is_minimal_at_the_observed_value():
     obs = np.array([2.0, 3.0])
     values = [noise.objective(obs, obs * s, 10) for s in (0.9, 1.0, 1.1)]
     assert values[1] < values[0] and values[1] < values[2]
+
+
+def test_calibrate_file_from_a_raw_time_series_npz(tmp_path):
+    """The documented path for a raw thermal time series: NPZ with ``deflection_m`` and
+    ``sample_rate_hz`` -> Welch (Hann, stated N) -> fit -> calibration.json."""
+    from afmlearn.calibrate.report import calibrate_file
+
+    rng = np.random.default_rng(11)
+    x = thermal_time_series(1024 * 300, sample_rate_hz=FS, temperature_k=T,
+                            background_m2_per_hz=2e-27, rng=rng, **TRUTH)
+    np.savez(tmp_path / "thermal.npz", deflection_m=x, sample_rate_hz=FS)
+    fit, result, spectrum = calibrate_file(
+        tmp_path / "thermal.npz", tmp_path / "out", read_options={"segment_length": 1024},
+        temperature_k=T, correction=ThermalCorrection.point_mass(), fit_range_hz=(60e3, 140e3),
+        compare=False)
+    assert spectrum.window == Hann() and spectrum.segment_length == 1024
+    assert result["window"]["stated_by_file"]
+    saved = (tmp_path / "out" / "calibration.json").read_text()
+    assert '"spring_constant_n_per_m_interval"' in saved
+    for name, value in TRUTH.items():
+        lo, hi = result[f"{name}_interval"]
+        assert lo <= value <= hi, (name, lo, value, hi)
