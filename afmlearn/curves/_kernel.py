@@ -40,7 +40,7 @@ from numba import njit
 
 N_LAW = 10
 
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
 
 
 @njit(cache=True, error_model="numpy")
