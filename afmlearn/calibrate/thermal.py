@@ -21,6 +21,7 @@ from typing import Any, final
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.ndimage import median_filter
 from scipy.optimize import minimize
 from scipy.stats import norm
 
@@ -236,8 +237,6 @@ def _default_response(spectrum: PowerSpectrum) -> BinResponse:
 
 def _first_estimate(f: FloatArray, p: FloatArray) -> dict[str, float]:
     """Peak, background and half-power width from a 5-bin running median."""
-    from scipy.ndimage import median_filter
-
     smooth = median_filter(p, size=5, mode="nearest")
     i = int(np.argmax(smooth))
     background = float(np.median(np.concatenate([smooth[: max(p.size // 10, 1)],

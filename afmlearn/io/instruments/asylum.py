@@ -127,9 +127,7 @@ def _segments(note: Mapping[str, Any], n: int, path: Path) -> np.ndarray:
     segment = np.zeros(n, dtype=np.int8)
     indexes, directions = note.get("Indexes"), note.get("Direction")
     if not isinstance(indexes, str) or not isinstance(directions, str):
-        if isinstance(indexes, float):  # a single index: nothing to split
-            return segment
-        return segment
+        return segment  # absent, or a single number: nothing to split
     try:
         idx = [int(float(v)) for v in indexes.split(",") if v.strip()]
         dirs = [float(v) for v in directions.split(",") if v.strip()]
