@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, final
 
 import numpy as np
+from numpy.typing import NDArray
 
 from afmlearn.io import Labels, Trace, write_trace
 from simulator import (
@@ -42,9 +43,12 @@ from simulator.forces import (
     ViscoelasticDMT,
 )
 from simulator.integrate import RK4
+from simulator.scenarios import Spectroscopy
 from simulator.sensor import DetectorNonlinearity, GaussianNoise
 
-__all__ = ["CAUSES", "EFFECT_CAUSES", "Case", "draw_case", "simulate_case", "hidden_trace"]
+__all__ = ["CAUSES", "EFFECT_CAUSES", "EFFECT_PAIRS", "Case", "SeriesCase", "draw_case",
+           "simulate_case", "hidden_trace", "draw_series_case", "simulate_series",
+           "hidden_series"]
 
 #: the cause vocabulary of design.md section 3 (``none`` first)
 CAUSES: tuple[str, ...] = ("none", "higher_mode", "viscoelastic", "long_range_damping",
@@ -52,6 +56,8 @@ CAUSES: tuple[str, ...] = ("none", "higher_mode", "viscoelastic", "long_range_da
                            "detector_nonlinearity")
 #: the causes that switch an effect on
 EFFECT_CAUSES: tuple[str, ...] = CAUSES[1:]
+
+FloatArray = NDArray[np.float64]
 
 _K = 20.68
 _F0 = 259.9e3
@@ -117,6 +123,17 @@ def draw_case(rng: np.random.Generator, *, cause: str | None = None) -> Case:
     hamaker = float(rng.uniform(0.5e-19, 2e-19))
     e_star = _loguniform(rng, 1e9, 5e9)
     a0 = float(rng.uniform(0.2e-9, 0.4e-9))
+    effect = _draw_effect(rng, cause, quality_factor=q, reduced_modulus_pa=e_star)
+    seed = int(rng.integers(2**31 - 1))
+    return Case(cause=cause, quality_factor=q, free_amplitude_ratio=ratio, tip_radius_m=radius,
+                hamaker_j=hamaker, reduced_modulus_pa=e_star, a0_m=a0, effect=effect,
+                seed=seed)
+
+
+def _draw_effect(rng: np.random.Generator, cause: str, *, quality_factor: float,
+                 reduced_modulus_pa: float, series: bool = False) -> dict[str, float]:
+    """The effect's own parameters (SI; empty for ``none``), drawn from ``rng``."""
+    q, e_star = quality_factor, reduced_modulus_pa
     effect: dict[str, float] = {}
     if cause == "higher_mode":
         # second flexural mode near the 6:1 internal resonance (rectangular beam: 6.267)
@@ -142,42 +159,66 @@ def draw_case(rng: np.random.Generator, *, cause: str | None = None) -> Case:
         # JKR neck: work of adhesion of polymers against oxidised silicon
         effect = {"work_of_adhesion_j_per_m2": float(rng.uniform(0.1, 0.3))}
     elif cause == "electrostatic":
-        # tip-sample potential difference (bias - contact potential), EFM/KPFM-like biases
-        effect = {"voltage_v": float(rng.uniform(4.0, 8.0))}
+        # tip-sample potential difference (bias - contact potential), EFM/KPFM-like biases;
+        # set-point series 2 - 5 V: above ~5 V (pi eps0 R V^2 / z ~ 15 nN at 1 nm) most
+        # set-points settle on the attractive branch (measured), which a tapping-mode user
+        # avoids; one orbit 4 - 8 V (below ~4 V invisible on one orbit, docs/diagnose.md)
+        lo, hi = (2.0, 5.0) if series else (4.0, 8.0)
+        effect = {"voltage_v": float(rng.uniform(lo, hi))}
     elif cause == "detector_nonlinearity":
         # optical-lever nonlinearity in free-amplitude units, both signs
         effect = {"a2": float(rng.choice([-1.0, 1.0]) * rng.uniform(0.02, 0.06)),
                   "a3": float(rng.choice([-1.0, 1.0]) * rng.uniform(0.0, 0.02))}
-    seed = int(rng.integers(2**31 - 1))
-    return Case(cause=cause, quality_factor=q, free_amplitude_ratio=ratio, tip_radius_m=radius,
-                hamaker_j=hamaker, reduced_modulus_pa=e_star, a0_m=a0, effect=effect,
-                seed=seed)
+    return effect
 
 
 def _force(case: Case, scales: Scales) -> Any:
-    base = {"hamaker_j": case.hamaker_j, "tip_radius_m": case.tip_radius_m,
-            "reduced_modulus_pa": case.reduced_modulus_pa, "a0_m": case.a0_m, "scales": scales}
-    e = case.effect
-    if case.cause == "viscoelastic":
-        return ViscoelasticDMT.from_si(**base, viscosity_si=e["viscosity_si"])
-    if case.cause == "contact_geometry":
-        return DMT.from_si(**base, exponent=e["exponent"],
-                           contact_coefficient=e["contact_coefficient"])
-    if case.cause == "adhesion_hysteresis":
-        return HystereticJKR.from_si(
-            reduced_modulus_pa=case.reduced_modulus_pa, tip_radius_m=case.tip_radius_m,
-            work_of_adhesion_j_per_m2=e["work_of_adhesion_j_per_m2"], a0_m=case.a0_m,
+    causes = () if case.cause == "none" else (case.cause,)
+    return _tip_sample_force(causes, {case.cause: case.effect}, hamaker_j=case.hamaker_j,
+                             tip_radius_m=case.tip_radius_m,
+                             reduced_modulus_pa=case.reduced_modulus_pa, a0_m=case.a0_m,
+                             scales=scales)
+
+
+def _tip_sample_force(causes: tuple[str, ...], effects: dict[str, dict[str, float]], *,
+                      hamaker_j: float, tip_radius_m: float, reduced_modulus_pa: float,
+                      a0_m: float, scales: Scales) -> Any:
+    """The simulator force model with the tip-sample effects of ``causes`` switched on.
+
+    The contact law is DMT (a cone-like power law for ``contact_geometry``, plus the
+    Kelvin--Voigt rate term for ``viscoelastic``) or the hysteretic JKR neck; long-range
+    damping and electrostatics are added terms. ``higher_mode`` and ``detector_nonlinearity``
+    act on the lever and the sensor, not here.
+    """
+    base = {"hamaker_j": hamaker_j, "tip_radius_m": tip_radius_m,
+            "reduced_modulus_pa": reduced_modulus_pa, "a0_m": a0_m, "scales": scales}
+    if "adhesion_hysteresis" in causes:
+        e = effects["adhesion_hysteresis"]
+        contact: Any = HystereticJKR.from_si(
+            reduced_modulus_pa=reduced_modulus_pa, tip_radius_m=tip_radius_m,
+            work_of_adhesion_j_per_m2=e["work_of_adhesion_j_per_m2"], a0_m=a0_m,
             scales=scales)
-    dmt = DMT.from_si(**base)
-    if case.cause == "long_range_damping":
-        return ForceSum([dmt, ExponentialDamping.from_si(
+    else:
+        law: dict[str, float] = {}
+        if "contact_geometry" in causes:
+            e = effects["contact_geometry"]
+            law = {"exponent": e["exponent"], "contact_coefficient": e["contact_coefficient"]}
+        contact = DMT.from_si(**base, **law)
+        if "viscoelastic" in causes:
+            visco = ViscoelasticDMT.from_si(**base,
+                                            viscosity_si=effects["viscoelastic"]["viscosity_si"])
+            contact = (visco if not law else
+                       ViscoelasticDMT(**{**visco.parameters(), **contact.parameters()}))
+    terms = [contact]
+    if "long_range_damping" in causes:
+        e = effects["long_range_damping"]
+        terms.append(ExponentialDamping.from_si(
             coefficient_ns_per_m=e["coefficient_ns_per_m"], decay_length_m=e["decay_length_m"],
-            scales=scales)])
-    if case.cause == "electrostatic":
-        return ForceSum([dmt, Electrostatic.from_si(voltage_v=e["voltage_v"],
-                                                    tip_radius_m=case.tip_radius_m,
-                                                    scales=scales)])
-    return dmt
+            scales=scales))
+    if "electrostatic" in causes:
+        terms.append(Electrostatic.from_si(voltage_v=effects["electrostatic"]["voltage_v"],
+                                           tip_radius_m=tip_radius_m, scales=scales))
+    return terms[0] if len(terms) == 1 else ForceSum(terms)
 
 
 def simulate_case(case: Case, path: str | os.PathLike[str], *, samples_per_period: int = 200,
@@ -288,3 +329,325 @@ def hidden_trace(rng: np.random.Generator, path: str | os.PathLike[str], *,
             continue
         return case
     raise RuntimeError(f"no tapping orbit in {max_draws} draws (cause {cause!r})")
+
+
+# ---------------------------------------------------------------------- set-point series
+#: pairs of effects that the simulator can switch on together (the hysteretic JKR neck has
+#: its own sphere law, so it combines with neither a cone-like exponent nor the
+#: Kelvin--Voigt term)
+EFFECT_PAIRS: tuple[tuple[str, str], ...] = tuple(
+    (a, b) for i, a in enumerate(EFFECT_CAUSES) for b in EFFECT_CAUSES[i + 1:]
+    if {a, b} not in ({"adhesion_hysteresis", "contact_geometry"},
+                      {"adhesion_hysteresis", "viscoelastic"}))
+
+
+@final
+@dataclass(frozen=True)
+class SeriesCase:
+    """One drawn set-point series: the hidden effects and every parameter (SI).
+
+    Attributes
+    ----------
+    causes : tuple of str
+        The effects switched on (empty: ``none``; one or two of :data:`EFFECT_CAUSES`).
+    quality_factor : float
+        Q of the fundamental, 150 - 450.
+    free_amplitude_m : float
+        Free amplitude at the drive [m], 12 - 40 nm (the tapping range of a stiff lever).
+    setpoints : tuple of float
+        Rest gap / free amplitude of each row, decreasing (an approach), 0.3 - 0.92.
+    settle_offsets : tuple of float
+        Drive phase at each row's first sample / ``2 pi``, in [0, 1) (random per row).
+    tip_radius_m, hamaker_j, reduced_modulus_pa, a0_m : float
+        Sample and tip, as :class:`Case`.
+    effects : dict of str to dict
+        Per cause, the effect's own parameters.
+    seed : int
+        Seed of the sensor noise.
+    """
+
+    causes: tuple[str, ...]
+    quality_factor: float
+    free_amplitude_m: float
+    setpoints: tuple[float, ...]
+    settle_offsets: tuple[float, ...]
+    tip_radius_m: float
+    hamaker_j: float
+    reduced_modulus_pa: float
+    a0_m: float
+    effects: dict[str, dict[str, float]] = field(default_factory=dict)
+    seed: int = 0
+
+    @property
+    def cause(self) -> str:
+        """The label: ``none``, the cause, or both causes joined by ``+``."""
+        return "+".join(self.causes) if self.causes else "none"
+
+    @property
+    def gaps_m(self) -> FloatArray:
+        """Rest gap of each row [m], shape (n_points,)."""
+        return np.asarray(self.setpoints) * self.free_amplitude_m
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"cause": self.cause, "causes": list(self.causes),
+                "quality_factor": self.quality_factor,
+                "free_amplitude_m": self.free_amplitude_m, "setpoints": list(self.setpoints),
+                "settle_offsets": list(self.settle_offsets), "tip_radius_m": self.tip_radius_m,
+                "hamaker_j": self.hamaker_j, "reduced_modulus_pa": self.reduced_modulus_pa,
+                "a0_m": self.a0_m, "effects": {k: dict(v) for k, v in self.effects.items()},
+                "seed": self.seed}
+
+
+def _as_causes(causes: str | tuple[str, ...] | list[str]) -> tuple[str, ...]:
+    if isinstance(causes, str):
+        causes = () if causes == "none" else tuple(causes.split("+"))
+    out = tuple(causes)
+    bad = [c for c in out if c not in EFFECT_CAUSES]
+    if bad or len(set(out)) != len(out) or len(out) > 2:
+        raise ValueError(f"causes must be 'none', one of {EFFECT_CAUSES} or two different "
+                         f"ones joined by '+', got {causes!r}")
+    if len(out) == 2 and tuple(sorted(out, key=EFFECT_CAUSES.index)) not in EFFECT_PAIRS:
+        raise ValueError(f"causes {out} cannot be simulated together; pairs: {EFFECT_PAIRS}")
+    return tuple(sorted(out, key=EFFECT_CAUSES.index))
+
+
+def draw_series_case(rng: np.random.Generator, *,
+                     causes: str | tuple[str, ...] | None = None, n_points: int = 8,
+                     two_effect_share: float = 0.25) -> SeriesCase:
+    """Draw a set-point series: the hidden effects and every parameter.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of every random choice (the causes included).
+    causes : str or tuple of str, optional
+        Force these effects (``"none"``, a cause, ``"a+b"`` or a tuple); the parameters stay
+        random. Default: with probability ``two_effect_share`` a pair of
+        :data:`EFFECT_PAIRS`, otherwise one of :data:`CAUSES` (``none`` included), uniformly.
+    n_points : int
+        Set-points (rows), 1 - 64. They spread over the rest-gap / free-amplitude range a
+        user scans in tapping mode: from 0.80 - 0.92 down to 0.30 - 0.45, evenly with a
+        jitter of a quarter step.
+    two_effect_share : float
+        In [0, 1]; see ``causes``.
+    """
+    if not (isinstance(n_points, (int, np.integer)) and 1 <= n_points <= 64):
+        raise ValueError(f"n_points must be an integer in [1, 64], got {n_points!r}")
+    if not 0.0 <= two_effect_share <= 1.0:
+        raise ValueError(f"two_effect_share must be in [0, 1], got {two_effect_share!r}")
+    if causes is None:
+        if rng.uniform() < two_effect_share:
+            chosen: tuple[str, ...] = EFFECT_PAIRS[int(rng.integers(len(EFFECT_PAIRS)))]
+        else:
+            c = str(rng.choice(CAUSES))
+            chosen = () if c == "none" else (c,)
+    else:
+        chosen = _as_causes(causes)
+    q = float(rng.uniform(150.0, 450.0))
+    amp = _loguniform(rng, 12e-9, 40e-9)
+    hi, lo = float(rng.uniform(0.80, 0.92)), float(rng.uniform(0.30, 0.45))
+    step = (hi - lo) / max(n_points - 1, 1)
+    sp = np.linspace(hi, lo, n_points) + rng.uniform(-0.25, 0.25, n_points) * step
+    if n_points == 1:
+        sp = np.array([float(rng.uniform(lo, hi))])
+    offsets = rng.uniform(0.0, 1.0, n_points)
+    radius = float(rng.uniform(5e-9, 20e-9))
+    hamaker = float(rng.uniform(0.5e-19, 2e-19))
+    e_star = _loguniform(rng, 1e9, 5e9)
+    a0 = float(rng.uniform(0.2e-9, 0.4e-9))
+    effects = {c: _draw_effect(rng, c, quality_factor=q, reduced_modulus_pa=e_star,
+                               series=True) for c in chosen}
+    seed = int(rng.integers(2**31 - 1))
+    return SeriesCase(causes=chosen, quality_factor=q, free_amplitude_m=amp,
+                      setpoints=tuple(float(v) for v in sp),
+                      settle_offsets=tuple(float(v) for v in offsets), tip_radius_m=radius,
+                      hamaker_j=hamaker, reduced_modulus_pa=e_star, a0_m=a0, effects=effects,
+                      seed=seed)
+
+
+def simulate_series(case: SeriesCase, path: str | os.PathLike[str], *,
+                    samples_per_period: int = 200, n_periods: float = 40.0,
+                    noise_level: float = 0.01, free_periods: float = 20.0,
+                    drive_phase: bool = True, labels: bool = True,
+                    min_tapping: int = 0) -> Path:
+    """Simulate the set-point series of ``case`` and write it as one trace file (atomically).
+
+    The rows come from the simulator's ``spectroscopy`` scenario: each a steady record at its
+    rest gap, reached as an approach reaches it (started on the free orbit, the rest gap
+    stepped to the row's, settled for ``3 Q`` periods), recorded for ``n_periods`` from a
+    random drive phase per row. Where both branches are stable the start decides between
+    the attractive and the tapping one, as in an instrument; rows of both kinds can occur.
+    The file holds ``deflection_m`` (n_points, n), ``gap_m`` (n_points,), the free trace and,
+    with ``drive_phase``, ``drive_phase_rad`` (n_points,) (the drive phase at each row's first
+    sample: drive ``cos(2 pi f_d t + drive_phase_rad)``, towards the sample). The truth goes
+    only into ``/labels`` (force, modal deflections, per-row scalars, ``effect`` = the causes
+    joined by ``+``); no attribute says which effect is on.
+
+    Parameters
+    ----------
+    case : SeriesCase
+        From :func:`draw_series_case`.
+    path : str or os.PathLike
+        Output ``.h5`` file; its name says nothing about the cause.
+    samples_per_period : int
+        Sampling rate / drive frequency, >= 20.
+    n_periods : float
+        Recorded drive periods per row, >= 5.
+    noise_level : float
+        Gaussian noise std / free amplitude, in [0, 1] (independent per row).
+    free_periods : float
+        Length of the stored free trace (same drive and sensor), > 0.
+    drive_phase : bool
+        Write ``drive_phase_rad`` (an instrument that captures the drive reference);
+        False: not recorded.
+    labels : bool
+        Write ``/labels``.
+    min_tapping : int
+        Raise ``_NotTapping`` (nothing written) when fewer rows than this are in the
+        repulsive (tapping) regime.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    return _write_series(_simulate_series(case, samples_per_period=samples_per_period,
+                                          n_periods=n_periods, noise_level=noise_level,
+                                          free_periods=free_periods, min_tapping=min_tapping),
+                         path, drive_phase=drive_phase, labels=labels)
+
+
+@final
+@dataclass(frozen=True)
+class _SeriesData:
+    """Simulated rows of a series in SI before writing (see :func:`simulate_series`)."""
+
+    case: SeriesCase
+    deflection_m: FloatArray          # (n_points, n)
+    force_n: FloatArray               # (n_points, n)
+    modal_m: FloatArray               # (n_modes, n_points, n)
+    tip_sample_gap_m: FloatArray      # (n_points, n)
+    drive_phase_rad: FloatArray       # (n_points,)
+    scalars: dict[str, Any]
+    free_deflection_m: FloatArray     # (m,)
+    sample_rate_hz: float
+    drive_frequency_hz: float
+    force_model: dict[str, Any]
+
+
+def _simulate_series(case: SeriesCase, *, samples_per_period: int, n_periods: float,
+                     noise_level: float, free_periods: float, min_tapping: int) -> _SeriesData:
+    if samples_per_period < 20:
+        raise ValueError(f"samples_per_period must be >= 20, got {samples_per_period}")
+    if not n_periods >= 5:
+        raise ValueError(f"n_periods must be >= 5, got {n_periods}")
+    if not 0.0 <= noise_level <= 1.0:
+        raise ValueError(f"noise_level must be in [0, 1], got {noise_level}")
+    if not free_periods > 0:
+        raise ValueError(f"free_periods must be > 0, got {free_periods}")
+    scales = Scales(spring_constant=_K, resonance_frequency=_F0, length=_GAP)
+    if "higher_mode" in case.causes:
+        e = case.effects["higher_mode"]
+        cl = Cantilever.rectangular(n_modes=2, quality_factor=case.quality_factor,
+                                    frequency_ratios=[1.0, e["frequency_ratio"]],
+                                    higher_quality_factors=[e["quality_factor_2"]])
+    else:
+        cl = Cantilever.rectangular(n_modes=1, quality_factor=case.quality_factor)
+    amp = case.free_amplitude_m / _GAP
+    exc = TipExcitation.for_free_amplitude(cl, 1.0, amp)
+    free_amp = exc.free_amplitude(cl, 1.0)
+
+    def sensor(i: int) -> SensorChain:
+        stages: list[Any] = []
+        if "detector_nonlinearity" in case.causes:
+            d = case.effects["detector_nonlinearity"]
+            stages.append(DetectorNonlinearity(a2=d["a2"], a3=d["a3"]))
+        stages.append(GaussianNoise(level=noise_level))
+        return SensorChain(stages, seed=int(np.random.SeedSequence([case.seed, i])
+                                            .generate_state(1)[0]))
+
+    force = _tip_sample_force(case.causes, case.effects, hamaker_j=case.hamaker_j,
+                              tip_radius_m=case.tip_radius_m,
+                              reduced_modulus_pa=case.reduced_modulus_pa, a0_m=case.a0_m,
+                              scales=scales)
+    system = System(cl, force, exc)
+    integrator = RK4(steps_per_period=120)
+    gaps = np.asarray(case.setpoints) * amp
+    res = Spectroscopy(omega=1.0, gaps=gaps, n_periods=n_periods,
+                       drive_phases=2 * np.pi * np.asarray(case.settle_offsets),
+                       settle_periods=3.0 * case.quality_factor,
+                       samples_per_period=samples_per_period, integrator=integrator).run(system)
+    si = res.to_si(scales)
+    lab = si["labels"]
+    tapping = int(sum(r == "repulsive" for r in lab["regime"]))
+    deepest = int(np.argmin(gaps))
+    if tapping < min_tapping or (min_tapping > 0 and lab["regime"][deepest] != "repulsive"):
+        raise _NotTapping(f"{tapping} of {gaps.size} rows tapping, need {min_tapping}")
+    phase = np.mod(np.broadcast_to(si["drive_phase_rad"], gaps.shape), 2 * np.pi)
+    done = [{"y": res.deflection[k], "force": si["force_n"][k], "modal": si["modal_m"][:, k],
+             "z": res.gap[k] * _GAP, "phase": float(phase[k]), "dt": res.dt,
+             "labels": {key: v[k] for key, v in lab.items()}} for k in range(gaps.size)]
+    ys = [sensor(i + 1)(r["y"], x_ref=free_amp, dt=r["dt"]) * _GAP for i, r in enumerate(done)]
+    free_sc = SteadyState(omega=1.0, gap=1.0, n_periods=free_periods, settle_periods=0.0,
+                          samples_per_period=samples_per_period, integrator=integrator)
+    free = free_sc.run(System(cl, NoInteraction(), exc))
+    y_free = sensor(0)(free.deflection, x_ref=free_amp, dt=free.dt) * _GAP
+    scalars: dict[str, Any] = {}
+    for key in done[0]["labels"]:
+        vals = [r["labels"][key] for r in done]
+        if all(isinstance(u, str) for u in vals):
+            scalars[key] = vals[0] if len(set(vals)) == 1 else ",".join(vals)
+        else:
+            scalars[key] = np.asarray(vals, float)
+    return _SeriesData(case=case, deflection_m=np.asarray(ys),
+                       force_n=np.asarray([r["force"] for r in done]),
+                       modal_m=np.stack([r["modal"] for r in done], axis=1),
+                       tip_sample_gap_m=np.asarray([r["z"] for r in done]),
+                       drive_phase_rad=np.asarray([r["phase"] for r in done]), scalars=scalars,
+                       free_deflection_m=y_free, sample_rate_hz=float(si["sample_rate_hz"]),
+                       drive_frequency_hz=float(np.atleast_1d(si["drive_frequency_hz"])[0]),
+                       force_model={"name": force.name, "force": force.to_dict()})
+
+
+def _write_series(data: _SeriesData, path: str | os.PathLike[str], *, drive_phase: bool,
+                  labels: bool) -> Path:
+    case = data.case
+    lab = None
+    if labels:
+        lab = Labels(data.force_n, modal_m=data.modal_m,
+                     model={**data.force_model, "case": case.to_dict()}, effect=case.cause,
+                     scalars=data.scalars, extra={"tip_sample_gap_m": data.tip_sample_gap_m,
+                                                  "drive_phase_rad": data.drive_phase_rad})
+    # no higher_mode_frequencies_hz (it would give the cause away), neutral description
+    trace = Trace(data.deflection_m, sample_rate_hz=data.sample_rate_hz,
+                  drive_frequency_hz=data.drive_frequency_hz, gap_m=case.gaps_m,
+                  drive_phase_rad=data.drive_phase_rad if drive_phase else None,
+                  free_deflection_m=data.free_deflection_m, labels=lab,
+                  spring_constant_n_per_m=_K, quality_factor=case.quality_factor,
+                  resonance_frequency_hz=_F0, free_amplitude_m=case.free_amplitude_m,
+                  excitation="tip", tip_radius_m=case.tip_radius_m,
+                  description="afmlearn set-point series")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_trace(trace, path)
+    return path
+
+
+def hidden_series(rng: np.random.Generator, path: str | os.PathLike[str], *,
+                  causes: str | tuple[str, ...] | None = None, n_points: int = 8,
+                  max_draws: int = 50, **kwargs: Any) -> SeriesCase:
+    """Draw a series (effects hidden unless given) and write it to ``path``.
+
+    Draws again, with the same ``rng``, while fewer than half of the rows (and the row at
+    the smallest gap) tap: a user scanning set-points in tapping mode works where the tip
+    touches, though strong attraction (a biased tip, a sticky sample) keeps the larger
+    set-points on the attractive branch. ``kwargs`` go to :func:`simulate_series`. Returns
+    the case (the truth: keep it away from the code under test).
+    """
+    for _ in range(max_draws):
+        case = draw_series_case(rng, causes=causes, n_points=n_points)
+        try:
+            simulate_series(case, path, min_tapping=max((n_points + 1) // 2, 1), **kwargs)
+        except _NotTapping:
+            continue
+        return case
+    raise RuntimeError(f"no tapping series in {max_draws} draws (causes {causes!r})")

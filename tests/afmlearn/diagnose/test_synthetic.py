@@ -5,8 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from afmlearn.diagnose.synthetic import CAUSES, draw_case
-from afmlearn.io import read_trace
+from afmlearn.diagnose.synthetic import (
+    CAUSES,
+    EFFECT_PAIRS,
+    draw_case,
+    draw_series_case,
+    hidden_series,
+    simulate_series,
+)
+from afmlearn.io import Experiment, read_trace
+from afmlearn.preprocess import fit_harmonics
 
 
 def test_draw_is_seeded_and_covers_the_vocabulary():
@@ -29,3 +37,98 @@ def test_trace_carries_truth_only_in_labels(make_trace):
     lab = read_trace(path, labels=True).labels
     assert lab.effect == "electrostatic" == case.cause
     assert lab.scalars["regime"] == "repulsive"      # tapping orbits only
+
+
+# ---------------------------------------------------------------------- set-point series
+def test_series_draw_is_seeded_covers_causes_and_pairs():
+    a = [draw_series_case(np.random.default_rng([2, i])) for i in range(80)]
+    assert a == [draw_series_case(np.random.default_rng([2, i])) for i in range(80)]
+    labels = {c.cause for c in a}
+    assert set(CAUSES) <= labels                      # every single cause and none
+    assert any(len(c.causes) == 2 for c in a)         # and draws with two effects
+    for c in a:
+        assert 150 <= c.quality_factor <= 450 and 12e-9 <= c.free_amplitude_m <= 40e-9
+        sp = np.asarray(c.setpoints)
+        assert sp.size == 8 and np.all(np.diff(sp) < 0)          # an approach
+        assert 0.25 < sp.min() < 0.5 and 0.75 < sp.max() < 0.95
+        assert np.ptp(c.settle_offsets) > 0.1                    # a drive phase per row
+        assert set(c.effects) == set(c.causes)
+        if len(c.causes) == 2:
+            assert c.causes in EFFECT_PAIRS
+    assert draw_series_case(np.random.default_rng(1), causes="electrostatic+viscoelastic"
+                            ).causes == ("viscoelastic", "electrostatic")
+    for bad in ("gremlins", "viscoelastic+viscoelastic",
+                "adhesion_hysteresis+contact_geometry", "a+b+c"):
+        with pytest.raises(ValueError, match="causes"):
+            draw_series_case(np.random.default_rng(0), causes=bad)
+    with pytest.raises(ValueError, match="n_points"):
+        draw_series_case(np.random.default_rng(0), n_points=0)
+
+
+@pytest.fixture(scope="module")
+def null_series(tmp_path_factory):
+    path = tmp_path_factory.mktemp("series") / "recording.h5"
+    case = hidden_series(np.random.default_rng([31, 4]), path, causes="none", n_points=4,
+                         samples_per_period=100, n_periods=10, noise_level=0.01,
+                         free_periods=5)
+    return path, case
+
+
+def test_series_file_carries_truth_only_in_labels(null_series):
+    path, case = null_series
+    tr = read_trace(path)
+    assert tr.labels is None and tr.is_series
+    assert tr.deflection_m.shape == (4, 1000)
+    np.testing.assert_allclose(tr.gap_m, np.asarray(case.setpoints) * case.free_amplitude_m)
+    assert tr.higher_mode_frequencies_hz is None
+    assert "none" not in (tr.description or "") and "none" not in path.name
+    exp = Experiment.read(path)
+    assert exp.kind == "series" and len(exp) == 4
+    assert np.all(np.isfinite(exp.drive_phases_rad))
+    lab = read_trace(path, labels=True).labels
+    assert lab.effect == "none" == case.cause
+    assert lab.force_n.shape == (4, 1000) and lab.modal_m.shape == (1, 4, 1000)
+    assert lab.scalars["regime"] == "repulsive" or "repulsive" in lab.scalars["regime"]
+
+
+def test_series_drive_phase_closes_the_energy_balance(null_series):
+    """Drive input minus lever damping per cycle, computed with the RECORDED drive phase on
+    the noise-free deflection, equals the energy the tip-sample force took (labels): the
+    phase is the drive's at each row's first sample (a phase off by 0.3 rad changes the
+    balance by 1 - cos(0.3) = 4.5 % of the drive work near resonance and fails)."""
+    path, case = null_series
+    tr = read_trace(path, labels=True)
+    lab = tr.labels
+    L = 10e-9                     # only ratios below; any length unit works
+    q = case.quality_factor
+    b = case.free_amplitude_m / L / q               # drive at resonance: A_free = B Q
+    omega = tr.drive_frequency_hz / tr.resonance_frequency_hz                 # = 1
+    tau = np.arange(tr.deflection_m.shape[1]) / tr.sample_rate_hz * 2 * np.pi \
+        * tr.resonance_frequency_hz
+    period = 2 * np.pi / omega
+    e_j = np.asarray(lab.scalars["dissipated_energy_j"])
+
+    def balance(v: np.ndarray, phase: float) -> float:
+        drive = b * np.cos(omega * tau + phase)
+        return float(np.mean(drive * v - v**2 / q) * period)       # [k L^2]
+
+    for i in range(tr.deflection_m.shape[0]):
+        x = lab.modal_m[:, i].sum(axis=0) / L
+        v = fit_harmonics(tau, x, omega, n_harmonics=40).evaluate(tau, 1)
+        e_true = e_j[i] / (tr.spring_constant_n_per_m * L**2)
+        phi = float(tr.drive_phase_rad[i])
+        scale = float(np.mean(b * np.abs(v)) * period)              # drive work scale
+        assert abs(balance(v, phi) - e_true) < 0.005 * scale, (balance(v, phi), e_true, scale)
+        assert abs(balance(v, phi + 0.3) - e_true) > 0.02 * scale
+
+
+def test_series_without_recorded_phase(tmp_path):
+    case = draw_series_case(np.random.default_rng(5), causes="higher_mode+detector_nonlinearity",
+                            n_points=2)
+    path = simulate_series(case, tmp_path / "a.h5", samples_per_period=60, n_periods=6,
+                           free_periods=4, drive_phase=False, labels=False)
+    tr = read_trace(path)
+    assert tr.drive_phase_rad is None and tr.higher_mode_frequencies_hz is None
+    assert np.all(np.isnan(Experiment.read(path).drive_phases_rad))
+    with pytest.raises(ValueError, match="n_periods"):
+        simulate_series(case, tmp_path / "b.h5", n_periods=1)
