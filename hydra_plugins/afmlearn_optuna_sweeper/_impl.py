@@ -113,10 +113,12 @@ class OptunaSweeperImpl:
                                 poll_interval=min(2.0, float(self.heartbeat_interval)),
                                 max_failures=self.max_failures, sampler_factory=factory,
                                 worker_index=index)
+        except BaseException:
+            for child in children:  # their running trials go stale and are retried on resume
+                child.terminate()
+            raise
         finally:
             for child in children:
-                if sys.exc_info()[0] is not None:
-                    child.terminate()
                 child.wait()
         log.info("worker %d: %d complete, %d pruned, %d failed in %.1f s", index,
                  result.complete, result.pruned, result.failed, result.seconds)
