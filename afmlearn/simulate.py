@@ -44,6 +44,7 @@ from hydra.utils import get_class, instantiate, to_absolute_path
 from omegaconf import DictConfig, ListConfig, OmegaConf, open_dict
 from tqdm.auto import tqdm
 
+from afmlearn.curves.writer import curve_trace
 from afmlearn.io import Labels, Trace, TraceWriter, shard_path, write_manifest, write_trace
 from simulator import (
     AbstractExcitation,
@@ -65,7 +66,7 @@ from simulator.forces import (
 )
 from simulator.labels import labels_to_si as si_labels
 from simulator.labels import recorded_drive_phase
-from simulator.scenarios import AbstractScenario, Spectroscopy
+from simulator.scenarios import AbstractScenario, LockInCurve, Spectroscopy
 
 __all__ = ["simulate", "build", "si_labels", "REGIME_CODES", "EV"]
 
@@ -144,6 +145,10 @@ def simulate(cfg: DictConfig) -> tuple[dict[str, Any], dict[str, Any]]:
             result = scenario.run(system, progress=bar)
             free = _run_free(obj, free_sc, bar)
             summary = _write_series(cfg, obj, path, result, free)
+        elif isinstance(scenario, LockInCurve):
+            result = scenario.run(system, progress=bar)
+            free = None  # the curve starts far from the sample: its first points are free
+            summary = _write_curve(cfg, obj, path, result)
         else:
             result = scenario.run(system, progress=bar)
             free = _run_free(obj, free_sc, bar)
@@ -626,6 +631,15 @@ def _write_single(cfg: DictConfig, obj: dict[str, Any], path: Path, result: Simu
         "coupling_strength": float(lab["coupling_strength"]),
         "regime": str(lab["regime"]),
     }
+
+
+def _write_curve(cfg: DictConfig, obj: dict[str, Any], path: Path,
+                 result: SimulationResult) -> dict[str, Any]:
+    """A lock-in curve: amplitude, phase, piezo position, segment (no deflection)."""
+    trace, summary = curve_trace(result, obj["scales"], _calibration(cfg, obj),
+                                 model=_model_json(cfg, obj) if cfg.labels else None)
+    write_trace(trace, path)
+    return summary
 
 
 def _write_sweep(cfg: DictConfig, obj: dict[str, Any], path: Path,

@@ -1,0 +1,92 @@
+"""Analyse one lock-in curve file: the function behind ``scripts/analyze_curves.py``."""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from afmlearn.io import read_trace, write_json
+from afmlearn.io.instruments import is_instrument_file, open_traces
+from simulator.lockin import LockIn
+
+from .curve import Curve
+from .diagnose import CurveDiagnoser
+
+__all__ = ["analyze_curve", "load_curve"]
+
+log = logging.getLogger(__name__)
+
+#: lock-in filter order assumed when a file states only the bandwidth
+DEFAULT_ORDER = 4
+
+
+def load_curve(path: str | os.PathLike[str], *, index: int = 0) -> tuple[Curve, LockIn | None]:
+    """The curve ``index`` of a trace file (.h5, labels never read) or an instrument file.
+
+    Returns the dimensionless :class:`Curve` and the lock-in filter the file states
+    (``lockin_bandwidth_hz``, order :data:`DEFAULT_ORDER`), or None when it states none.
+
+    Raises
+    ------
+    ValueError
+        For a missing or unreadable file, one that is not a lock-in curve, or a bad index.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"trace: no such file {p}")
+    traces = open_traces(p) if is_instrument_file(p) else [read_trace(p)]
+    if not 0 <= index < len(traces):
+        raise ValueError(f"index must be in [0, {len(traces)}) for {p.name}, got {index}")
+    trace = traces[index]
+    curve = Curve.from_trace(trace)
+    bw = getattr(trace, "lockin_bandwidth_hz", None)
+    lockin = None
+    if bw is not None and math.isfinite(float(bw)) and 0 < bw < 0.5 * curve.resonance_frequency_hz:
+        lockin = LockIn(bandwidth=float(bw) / curve.resonance_frequency_hz,
+                        order=DEFAULT_ORDER, output_interval=float(curve.tau[1] - curve.tau[0]))
+    return curve, lockin
+
+
+def analyze_curve(trace: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
+                  diagnoser: CurveDiagnoser | None = None, index: int = 0,
+                  figures: Callable[[CurveDiagnoser, Path], list[Path]] | None = None
+                  ) -> dict[str, Any]:
+    """Diagnose one curve and write ``<out_dir>/report.json`` (and figures).
+
+    Parameters
+    ----------
+    trace : path
+        Trace file (format v1 with lock-in fields) or instrument file (Asylum ``.ibw`` ...).
+    out_dir : path
+        Created if missing.
+    diagnoser : CurveDiagnoser, optional
+        Settings (its ``lockin`` is replaced by the file's filter when the file states one).
+    index : int
+        Curve of a file holding several.
+    figures : callable, optional
+        ``figures(fitted_diagnoser, out_dir) -> paths`` (``afmlearn.plots.curves``).
+
+    Returns
+    -------
+    dict
+        The report (``design.md`` section 3 keys plus ``curve``).
+    """
+    curve, lockin = load_curve(trace, index=index)
+    diag = diagnoser if diagnoser is not None else CurveDiagnoser()
+    if lockin is not None:
+        diag.lockin = lockin
+    diag.fit(curve)
+    report = diag.report()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if figures is not None:
+        report["figures"] = [os.path.relpath(f, out) for f in figures(diag, out)]
+    report["input"] = Path(trace).name
+    write_json(out / "report.json", report)
+    log.info("%s: cause %s (confidence %.2f, gain %.3f)", Path(trace).name, report["cause"],
+             report["confidence"], report["gain"])
+    return report

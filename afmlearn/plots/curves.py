@@ -1,0 +1,105 @@
+"""Figures of a lock-in curve diagnosis (matplotlib, Agg canvas, PNGs written atomically).
+
+`plot_curve_fit`
+    Measured amplitude and phase against piezo position (approach and retraction) with the
+    baseline and extended models' predictions (the retraction is held out).
+`plot_curve_force`
+    The fitted conservative force laws against the gap (baseline and extended).
+`plot_curve_dissipation`
+    Energy dissipated per cycle from amplitude and phase (Cleveland/Anczykowski).
+`curve_figures`
+    All three (the figure writer of ``scripts/analyze_curves.py``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from afmlearn.curves import CurveDiagnoser
+from afmlearn.io._atomic import atomic_path
+
+__all__ = ["plot_curve_fit", "plot_curve_force", "plot_curve_dissipation", "curve_figures"]
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    FigureCanvasAgg(fig)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    return path
+
+
+def plot_curve_fit(diag: CurveDiagnoser, path: str | os.PathLike[str]) -> Path:
+    """Amplitude [nm] and phase [deg] against piezo position [nm], data and models."""
+    c = diag.curve_
+    nm = c.length_m * 1e9
+    fig = Figure(figsize=(7.5, 6.0))
+    ax_a, ax_p = fig.subplots(2, 1, sharex=True)
+    preds = {"baseline": diag.baseline_.predict(c)}
+    if diag.cause_ != "none":
+        preds[f"extended ({diag.cause_})"] = diag.extended_.predict(c)
+    for seg, name, colour in ((0, "approach (fitted)", "#1f77b4"),
+                              (1, "retraction (held out)", "#ff7f0e")):
+        m = c.segment == seg
+        ax_a.plot(c.z_piezo[m] * nm, c.amplitude[m] * nm, ".", ms=2, color=colour, label=name)
+        ax_p.plot(c.z_piezo[m] * nm, np.degrees(c.phase[m]), ".", ms=2, color=colour)
+    for (label, (a, p)), style in zip(preds.items(), ("k-", "r--"), strict=False):
+        for seg in (0, 1):
+            m = c.segment == seg
+            ax_a.plot(c.z_piezo[m] * nm, a[m] * nm, style, lw=1,
+                      label=label if seg == 0 else None)
+            ax_p.plot(c.z_piezo[m] * nm, np.degrees(p[m]), style, lw=1)
+    ax_a.set_ylabel("amplitude [nm]")
+    ax_p.set_ylabel("phase lag [deg]")
+    ax_p.set_xlabel("piezo position [nm] (larger = further)")
+    ax_a.legend(fontsize=7)
+    ax_a.set_title(f"cause: {diag.cause_} (confidence {diag.confidence_:.2f}, "
+                   f"held-out gain {diag.gain_:.3f})", fontsize=9)
+    return _save(fig, Path(path))
+
+
+def plot_curve_force(diag: CurveDiagnoser, path: str | os.PathLike[str]) -> Path:
+    """Conservative force [nN] against gap [nm] of the fitted laws."""
+    c = diag.curve_
+    law = diag.extended_.law_
+    z = np.linspace(-0.5 * law.a0 - 0.02, 0.3, 400)
+    fig = Figure(figsize=(6.0, 4.0))
+    ax = fig.subplots()
+    for name, fit, style in (("baseline", diag.baseline_, "k-"),
+                             (f"extended ({diag.cause_})", diag.extended_, "r--")):
+        ax.plot(z * c.length_m * 1e9, fit.law_.conservative(z) * c.force_unit_n * 1e9, style,
+                label=name)
+        if diag.cause_ == "none":
+            break
+    ax.axhline(0.0, color="0.7", lw=0.5)
+    ax.set_xlabel("gap z [nm]")
+    ax.set_ylabel("force [nN] (> 0 repulsive)")
+    ax.legend(fontsize=8)
+    return _save(fig, Path(path))
+
+
+def plot_curve_dissipation(diag: CurveDiagnoser, path: str | os.PathLike[str]) -> Path:
+    """Energy dissipated per cycle [eV] against piezo position [nm]."""
+    c = diag.curve_
+    e = diag.dissipation() / 1.602176634e-19
+    fig = Figure(figsize=(6.0, 4.0))
+    ax = fig.subplots()
+    for seg, name in ((0, "approach"), (1, "retraction")):
+        m = c.segment == seg
+        ax.plot(c.z_piezo[m] * c.length_m * 1e9, e[m], ".", ms=2, label=name)
+    ax.set_xlabel("piezo position [nm]")
+    ax.set_ylabel("dissipated energy per cycle [eV]")
+    ax.legend(fontsize=8)
+    return _save(fig, Path(path))
+
+
+def curve_figures(diag: CurveDiagnoser, out_dir: Path) -> list[Path]:
+    """The three figures into ``out_dir``."""
+    out = Path(out_dir)
+    return [plot_curve_fit(diag, out / "curve_fit.png"),
+            plot_curve_force(diag, out / "curve_force.png"),
+            plot_curve_dissipation(diag, out / "curve_dissipation.png")]
