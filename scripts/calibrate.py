@@ -51,6 +51,12 @@ def main(cfg: DictConfig) -> None:
     for name in ("resonance_frequency_hz", "quality_factor", "spring_constant_n_per_m"):
         lo, hi = result[f"{name}_interval"]
         print(f"{name:<26} {result[name]:.6g}  [{lo:.6g}, {hi:.6g}]")
+    check = result.get("line_shape_check")
+    if check is not None:
+        print(f"line shape: with a second oscillator at {check['second']['frequency_hz']:.6g} Hz "
+              f"({100 * check['second']['power_share']:.1f} % of the power) the main Q is "
+              f"{check['main']['quality_factor']:.4g}; reduced deviance "
+              f"{check['reduced_deviance_single']:.3g} -> {check['reduced_deviance']:.3g}")
     for name, value in result.get("vendor", {}).items():
         print(f"vendor {name:<19} {value:.6g}")
     for note in result["notes"]:

@@ -4,7 +4,8 @@ Steps: read the spectrum (`read.read_spectrum`); if the instrument's window is u
 it from the data (`infer_window`: neighbouring bins of a tapered window are correlated, of a
 rectangular one not); fit `ThermalFit` with that window's bin response and the Gamma
 likelihood; fit the naive variants too (least squares on the ASD or on the PSD, maximum
-likelihood without bin response) so the report shows what each assumption does to Q; write
+likelihood without bin response) so the report shows what each assumption does to Q, and
+check the line shape with a second oscillator (`lineshape.second_peak_check`); write
 ``calibration.json`` with the trace format's names and intervals.
 """
 
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from afmlearn.calibrate.correction import ThermalCorrection
+from afmlearn.calibrate.lineshape import second_peak_check
 from afmlearn.calibrate.noise import AmplitudeLeastSquares, GammaLikelihood, PowerLeastSquares
 from afmlearn.calibrate.read import read_spectrum
 from afmlearn.calibrate.response import PointSample, WindowResponse
@@ -72,7 +74,8 @@ def calibrate_spectrum(spectrum: PowerSpectrum, *, temperature_k: float | None =
     window : Window, optional
         The instrument's window when the spectrum does not say; default inferred.
     compare : bool
-        Also fit the naive variants (reported under ``"comparison"``).
+        Also fit the naive variants (``"comparison"``) and a second oscillator
+        (``"line_shape_check"``, `lineshape.second_peak_check`).
     """
     notes = []
     temp = temperature_k or spectrum.header.get("temperature_k")
@@ -117,6 +120,7 @@ def calibrate_spectrum(spectrum: PowerSpectrum, *, temperature_k: float | None =
                 "quality_factor_interval": list(other.intervals_["quality_factor"]),
                 "spring_constant_n_per_m": other.spring_constant_n_per_m_,
                 "reduced_deviance": other.reduced_deviance_}
+        result["line_shape_check"] = second_peak_check(spectrum, fit)
     vendor = {k.removeprefix("vendor_"): v for k, v in spectrum.header.items()
               if k.startswith("vendor_") and isinstance(v, float)}
     if vendor:

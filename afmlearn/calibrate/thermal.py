@@ -140,6 +140,7 @@ class ThermalFit:
             return noise.objective(p, e, n_avg)
 
         u = np.zeros(4)
+        steps = np.array([1.0 / guess["q"], 0.2, 0.2, 0.2])  # f0: about one line width
         if not isinstance(response, PointSample):
             # warm start: the point-sampled model is ~20x cheaper and lands next to the optimum
             def point(v: FloatArray) -> float:
@@ -148,8 +149,8 @@ class ThermalFit:
                 e = sho_psd(f, f0, q, dc) + b
                 return noise.objective(p, e, n_avg) if np.all(e > 0) else math.inf
 
-            u = _optimise(point, u)
-        u = _optimise(objective, u, polish=not isinstance(response, PointSample))
+            u = _optimise(point, u, steps=steps)
+        u = _optimise(objective, u, steps=steps, polish=not isinstance(response, PointSample))
         e = expected(u)
         jac = _jacobian(expected, u, e)
         inflation = variance_inflation(response.window, response.segment_length) \
@@ -162,9 +163,10 @@ class ThermalFit:
         z = float(norm.ppf(0.5 + self.confidence / 2.0))
         theta = theta0 * np.exp(u)
         sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-        self.intervals_ = {name: (float(theta[i] * math.exp(-z * sd[i])),
-                                  float(theta[i] * math.exp(z * sd[i])))
-                           for i, name in enumerate(PARAMETERS)}
+        with np.errstate(over="ignore"):  # an unidentifiable parameter: (0, inf)
+            self.intervals_ = {name: (float(theta[i] * np.exp(-z * sd[i])),
+                                      float(theta[i] * np.exp(z * sd[i])))
+                               for i, name in enumerate(PARAMETERS)}
         (self.resonance_frequency_hz_, self.quality_factor_, self.spring_constant_n_per_m_,
          self.background_m2_per_hz_) = (float(v) for v in theta)
         self.covariance_log_ = cov
@@ -254,12 +256,15 @@ def _first_estimate(f: FloatArray, p: FloatArray) -> dict[str, float]:
             "background": max(background, peak * 1e-6)}
 
 
-def _optimise(objective, u0: FloatArray, *, polish: bool = False) -> FloatArray:
-    """Minimise a negative log-likelihood over log parameters: Nelder-Mead from ``u0``
-    (a small simplex when ``polish``: ``u0`` is already close), then BFGS. Tolerances are
-    absolute on the objective: 1e-4 is far below the 0.5 of one standard deviation."""
-    step = 0.01 if polish else 0.2
-    simplex = np.vstack([u0, u0 + step * np.eye(u0.size)])
+def _optimise(objective, u0: FloatArray, *, steps: FloatArray, polish: bool = False
+              ) -> FloatArray:
+    """Minimise a negative log-likelihood over log parameters: Nelder-Mead from ``u0`` with
+    an initial simplex of ``steps`` (a twentieth of them when ``polish``: ``u0`` is already
+    close; a frequency's step is about one line width, ``1/Q`` in log units), then BFGS.
+    Tolerances are absolute on the objective: 1e-4 is far below the 0.5 of one standard
+    deviation."""
+    scale = 0.05 if polish else 1.0
+    simplex = np.vstack([u0, u0 + scale * np.diag(steps)])
     res = minimize(objective, u0, method="Nelder-Mead",
                    options={"initial_simplex": simplex, "xatol": 1e-8, "fatol": 1e-4,
                             "maxiter": 4000, "maxfev": 4000})

@@ -155,3 +155,30 @@ def test_calibrate_file_from_a_raw_time_series_npz(tmp_path):
     for name, value in TRUTH.items():
         lo, hi = result[f"{name}_interval"]
         assert lo <= value <= hi, (name, lo, value, hi)
+
+
+def _gamma_spectrum(psd, f, n_avg, seed):
+    rng = np.random.default_rng(seed)
+    return PowerSpectrum(f, psd * rng.gamma(n_avg, 1.0 / n_avg, f.size), n_averages=n_avg)
+
+
+def test_second_peak_check_finds_a_hidden_neighbour_and_leaves_a_single_line_alone():
+    from afmlearn.calibrate.lineshape import second_peak_check
+
+    f = np.arange(2000) * 40.0 + 140e3
+    f0, q, k, b = 180e3, 450.0, 9.0, 1e-26
+    main = sho_psd(f, f0, q, dc_level(f0, q, k, T, 1.0)) + b
+    extra = sho_psd(f, 178.9e3, 230.0, dc_level(178.9e3, 230.0, 120.0, T, 1.0))
+    for psd, hidden in ((main + extra, True), (main, False)):
+        spec = _gamma_spectrum(psd, f, 1000, seed=4)
+        single = ThermalFit(temperature_k=T, correction=ThermalCorrection.point_mass(),
+                            response=PointSample()).fit(spec)
+        check = second_peak_check(spec, single)
+        if hidden:  # the single line is rejected and biased; two lines recover the truth
+            assert single.reduced_deviance_ > 1.3 and single.quality_factor_ < 0.95 * q
+            assert check["reduced_deviance"] < 1.1
+            assert check["main"]["quality_factor"] == pytest.approx(q, rel=0.05)
+            assert check["second"]["frequency_hz"] == pytest.approx(178.9e3, abs=200)
+        else:
+            assert single.reduced_deviance_ < 1.1
+            assert check["reduced_deviance"] > single.reduced_deviance_ - 0.05
