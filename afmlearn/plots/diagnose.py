@@ -276,7 +276,7 @@ class _Harmonics:
 
 
 def force_gap_data(orbit: Any, model: Any, *, significance: float = 3.0,
-                   tolerance: float = 0.1) -> dict[str, Any]:
+                   tolerance: float = 0.1, scale: float | None = None) -> dict[str, Any]:
     """What the force-versus-gap panel draws for one model on one measured orbit.
 
     The lever equation inverted on the measured orbit weighs harmonic ``n`` by ``~n^2``, so
@@ -287,8 +287,7 @@ def force_gap_data(orbit: Any, model: Any, *, significance: float = 3.0,
     linear inversion) plus the truncation error (what dropping the harmonics above
     ``n_keep`` does to the model's own force along this orbit, maximal over a resolution
     cell). The inversion is *determined* where that uncertainty is below ``tolerance`` times
-    the range of the inverted force itself (a scale set by the data, the same for every
-    model); elsewhere it is NaN (not drawn).
+    ``scale`` (the force range that matters); elsewhere it is NaN (not drawn).
 
     Parameters
     ----------
@@ -299,7 +298,11 @@ def force_gap_data(orbit: Any, model: Any, *, significance: float = 3.0,
     significance : float
         Harmonic detection level in sigma of one real coefficient, > 0.
     tolerance : float
-        Largest uncertainty drawn, as a share of the inverted force's range, > 0.
+        Largest uncertainty drawn, as a share of ``scale``, > 0.
+    scale : float, optional
+        Force range [k L_ref] the tolerance refers to; default the model's own force range
+        along the orbit (:func:`force_gap_panel_data` passes the baseline's to both models,
+        so an extension with an extreme force law does not loosen it).
 
     Returns
     -------
@@ -342,7 +345,8 @@ def force_gap_data(orbit: Any, model: Any, *, significance: float = 3.0,
     padded = np.concatenate([trunc[-cell:], trunc, trunc[:cell]])
     trunc = np.max(np.lib.stride_tricks.sliding_window_view(padded, 2 * cell + 1), axis=1)
     band = noise + trunc
-    tol = tolerance * float(np.ptp(inv)) if np.ptp(inv) > 0 else float(np.max(noise))
+    ref = float(np.ptp(f_mod)) if scale is None else float(scale)
+    tol = tolerance * ref if ref > 0 else float(np.max(noise))
     det = band <= tol
     return {"theta": orbit.theta, "z": orbit.gap - x, "zdot": -v, "model": f_mod,
             "inverted": np.where(det, inv, np.nan), "inverted_all": inv, "band": band,
@@ -361,10 +365,16 @@ def _branches(z: FloatArray, zdot: FloatArray) -> list[tuple[str, NDArray[np.int
 def force_gap_panel_data(dg: Any, *, significance: float = 3.0, tolerance: float = 0.1
                          ) -> list[list[dict[str, Any]]]:
     """What :func:`plot_force_gap` draws: per model (baseline, extended), one
-    :func:`force_gap_data` dict per observation."""
-    return [[force_gap_data(ob.orbit, ob.baseline if j == 0 else ob.extended,
-                            significance=significance, tolerance=tolerance)
-             for ob in observations(dg)] for j in range(2)]
+    :func:`force_gap_data` dict per observation (tolerance relative to the baseline's force
+    range on that orbit)."""
+    out: list[list[dict[str, Any]]] = [[], []]
+    for ob in observations(dg):
+        base = force_gap_data(ob.orbit, ob.baseline, significance=significance,
+                              tolerance=tolerance)
+        out[0].append(base)
+        out[1].append(force_gap_data(ob.orbit, ob.extended, significance=significance,
+                                     tolerance=tolerance, scale=float(np.ptp(base["model"]))))
+    return out
 
 
 def plot_force_gap(dg: Any, path: str | os.PathLike[str], *, significance: float = 3.0,
@@ -548,6 +558,10 @@ def plot_candidates(dg: Any, path: str | os.PathLike[str]) -> Path:
     thr = np.array([c.threshold for c in cands])
     cols = [_EXT if c.cause == dg.cause_ else (_BASE if c.significant else "0.75")
             for c in cands]
+    if not cands:
+        for ax_ in (a, b):
+            ax_.text(0.5, 0.5, "no cause tested", ha="center", va="center")
+        return _save(fig, _path(path))
     a.bar(x, d, color=cols)
     a.scatter(x, thr, marker="_", s=400, color="k", label="null threshold")
     a.set_yscale("log")
