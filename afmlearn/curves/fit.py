@@ -49,6 +49,9 @@ class CurveFitter:
         Starting values by field name (``offset``, law fields, ``drift``): a previous fit.
     step : float
         Time step of the slow flow (dimensionless; default two drive periods).
+    n_starts : int
+        Least-squares runs from the best points of the start scan (the bistable jump makes
+        the cost rough: more starts, fewer local minima); the best fit is kept.
 
     Attributes
     ----------
@@ -72,7 +75,7 @@ class CurveFitter:
     def __init__(self, *, hypothesis: Hypothesis | None = None, a0_m: float = 0.3e-9,
                  tip_radius_m: float = 10e-9, lockin: LockIn | None = None,
                  max_nfev: int = 60, start: dict | None = None,
-                 step: float = 4.0 * math.pi) -> None:
+                 step: float = 4.0 * math.pi, n_starts: int = 1) -> None:
         if hypothesis is not None and not isinstance(hypothesis, Hypothesis):
             raise ValueError(f"hypothesis must be a Hypothesis, got {type(hypothesis).__name__}")
         for name, v in (("a0_m", a0_m), ("tip_radius_m", tip_radius_m)):
@@ -89,6 +92,9 @@ class CurveFitter:
         if not (math.isfinite(float(step)) and float(step) > 0.0):
             raise ValueError(f"step must be a finite number > 0, got {step!r}")
         self.step = float(step)
+        if int(n_starts) < 1:
+            raise ValueError(f"n_starts must be >= 1, got {n_starts!r}")
+        self.n_starts = int(n_starts)
 
     # ------------------------------------------------------------------ public API
     def fit(self, curve: Curve, *, mask: NDArray[np.bool_] | None = None) -> CurveFitter:
@@ -103,15 +109,20 @@ class CurveFitter:
         if self.hypothesis is not None:
             params += list(self.hypothesis.parameters)
         self._params = params
-        x0 = self._start(curve, params)
+        starts = self._start(curve, params)
         w0 = self.model_.omega
         lo = np.array([self._offset_bounds[0], w0 - 0.005] + [_enc(p, p.low) for p in params])
         hi = np.array([self._offset_bounds[1], w0 + 0.005] + [_enc(p, p.high) for p in params])
-        x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
-        res = optimize.least_squares(self._residual, x0, bounds=(lo, hi), method="trf",
-                                     x_scale="jac", diff_step=1e-4, max_nfev=self.max_nfev)
-        self._set(res.x)
-        r = self._residual(res.x)
+        best = None
+        for x0 in starts:
+            x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
+            res = optimize.least_squares(self._residual, x0, bounds=(lo, hi), method="trf",
+                                         x_scale="jac", diff_step=1e-4,
+                                         max_nfev=self.max_nfev)
+            if best is None or res.cost < best.cost:
+                best = res
+        self._set(best.x)
+        r = self._residual(best.x)
         self.chi2_ = float(r @ r)
         self.n_fit_ = int(r.size)
         return self
@@ -164,8 +175,9 @@ class CurveFitter:
         self.offset_ = self.values_[OFFSET]
         self.drift_ = self.values_.get(DRIFT, 0.0)
 
-    def _start(self, curve: Curve, params: list[Parameter]) -> NDArray[np.float64]:
-        """Start vector: the given start, else a scan of offset and the baseline's scales."""
+    def _start(self, curve: Curve, params: list[Parameter]) -> list[NDArray[np.float64]]:
+        """Start vectors: the given start, else the ``n_starts`` best points of a scan of the
+        offset and the baseline's scales."""
         app = curve.segment == 0
         sel = app & (curve.amplitude > 0.2) & (curve.amplitude < 0.9)
         guess = (float(np.median(curve.z_piezo[sel] - curve.amplitude[sel])) if sel.any()
@@ -174,19 +186,20 @@ class CurveFitter:
         if self.start is not None:
             x = [self.start.get(OFFSET, guess), self.start.get(OMEGA, self.model_.omega)]
             x += [_enc(p, self.start.get(p.field, p.init)) for p in params]
-            return np.array(x)
-        best, best_x = math.inf, None
+            return [np.array(x)]
+        scan = []
         tail = [_enc(p, p.init) for p in params[2:]]
-        for off in (guess - 0.05, guess, guess + 0.05):
+        offsets = (guess - 0.05, guess, guess + 0.05) if self.n_starts == 1 else \
+            tuple(guess + np.linspace(-0.1, 0.1, 5))
+        for off in offsets:
             for vdw in (1e-6, 1e-5, 1e-4):
                 for e in (1.0, 30.0, 1000.0):
                     x = np.array([off, self.model_.omega, math.log10(vdw), math.log10(e)]
                                  + tail)
                     r = self._residual(x)
-                    c = float(r @ r)
-                    if c < best:
-                        best, best_x = c, x
-        return best_x
+                    scan.append((float(r @ r), len(scan), x))
+        scan.sort(key=lambda t: (t[0], t[1]))
+        return [x for _, _, x in scan[: self.n_starts]]
 
 
 def _enc(p: Parameter, v: float) -> float:
