@@ -264,3 +264,91 @@ def constrained_sr3_baseline(mat: Matrix, truth: Truth, *, q: float) -> dict[str
     assert best is not None
     best["sweep"] = sweep
     return best
+
+
+# ---------------------------------------------------------------------------- set-point series
+@dataclass(frozen=True)
+class SeriesCase:
+    """A set-point series: steady records at the rest gaps ``gaps`` (/ L_ref), same drive.
+
+    Every row is a ``scenario=steady`` simulation at its own gap (settled from the free orbit,
+    as an approach reaches that gap) with its own noise seed; the drive phase at each row's
+    first sample (design.md section 2 convention) is kept with the cached row.
+    """
+
+    force: str
+    noise: float
+    spp: int
+    periods: int
+    gaps: tuple[float, ...]
+    extra: tuple[str, ...] = ()
+    seed: int = 0
+    settle: int = SETTLE_PERIODS
+
+    def row_case(self, i: int) -> Case:
+        return Case(self.force, self.noise, self.spp, self.periods,
+                    extra=(*self.extra, f"scenario.gap={self.gaps[i]:.6g}"),
+                    seed=1000 * self.seed + i)
+
+
+@dataclass
+class SeriesData:
+    """Rows of a simulated series with their truth, in ONE length unit (the mean rest gap).
+
+    ``traces`` carry ``drive_phase_rad`` when the Trace supports it; ``phases`` (n_obs,) is the
+    drive phase at each row's first sample either way. Truth arrays have shape (n_obs, n).
+    """
+
+    traces: list[Trace]
+    phases: FloatArray
+    length_m: float
+    force: FloatArray
+    z: FloatArray
+    a0: float
+
+
+def series_for(case: SeriesCase) -> SeriesData:
+    """Simulate (or read from the cache) every row of ``case``; truth in the common unit."""
+    import dataclasses
+    import json
+
+    from hydra import compose, initialize_config_dir
+
+    from afmlearn.simulate import simulate
+
+    CACHE.mkdir(parents=True, exist_ok=True)
+    traces, phases, labelled = [], [], []
+    for i in range(len(case.gaps)):
+        rc = case.row_case(i)
+        # a random fraction of a period on top of the settling: a random drive phase per row
+        settle = case.settle + float(np.random.default_rng([case.seed, i]).uniform())
+        rc = Case(rc.force, rc.noise, rc.spp, rc.periods, seed=rc.seed,
+                  extra=(*rc.extra, f"scenario.settle_periods={settle:.6f}"))
+        path = CACHE / f"{rc.key}.h5"
+        side = path.with_suffix(".json")
+        if not (path.exists() and side.exists()):
+            ov = [o for o in rc.overrides(path)
+                  if o != f"scenario.settle_periods={SETTLE_PERIODS}"]
+            with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+                cfg = compose("simulate", overrides=ov)
+            _, objects = simulate(cfg)
+            phase0 = float(np.asarray(objects["result"].phase).reshape(-1)[0])
+            side.write_text(json.dumps({"drive_phase_rad": phase0}))
+        phase = float(json.loads(side.read_text())["drive_phase_rad"])
+        tr = read_trace(path)
+        if "drive_phase_rad" in {f.name for f in dataclasses.fields(tr)}:
+            tr = dataclasses.replace(tr, drive_phase_rad=phase)
+        traces.append(tr)
+        phases.append(math.remainder(phase, 2 * math.pi))
+        labelled.append(read_trace(path, labels=True))
+    length = float(np.mean([float(t.gap_m) for t in traces]))
+    k = traces[0].spring_constant_n_per_m
+    lab0 = labelled[0].labels
+    assert lab0 is not None
+    tm = true_model(lab0.model, omega=1.0, quality_factor=traces[0].quality_factor)
+    a0_m = tm.a0 * float(lab0.model["calibration"]["length_m"]) if tm is not None else math.nan
+    force = np.stack([np.asarray(t.labels.force_n, float) for t in labelled]) / (k * length)
+    z = np.stack([np.asarray(t.labels.extra["tip_sample_gap_m"], float)
+                  for t in labelled]) / length
+    return SeriesData(traces=traces, phases=np.array(phases), length_m=length, force=force,
+                      z=z, a0=a0_m / length)

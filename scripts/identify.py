@@ -3,12 +3,16 @@
 Examples
 --------
     python scripts/identify.py trace=outputs/trace.h5 out_dir=outputs/identify
+    python scripts/identify.py trace=series.h5 out_dir=out          # all set-points jointly
+    python scripts/identify.py trace=series.h5 row=3 out_dir=out    # one set-point alone
     python scripts/identify.py trace=sweep.h5 row=20 out_dir=out identifier=fast
 
 Writes <out_dir>/result.json, model.json, force.h5 and figures (see
-afmlearn.identify.infer.identify_trace); the file's /labels group is never read. Bad input
-(missing calibration, fewer than 20 samples per drive period, clipped signal, NaN, not a trace
-file, a sweep without `row`) prints `error: ...` and exits with status 2.
+afmlearn.identify.infer.identify_trace; figures from afmlearn.plots.identify); the file's
+/labels group is never read. Prints the equation and the contact exponent with its 95 %
+profile-likelihood interval (saying so when the data do not bound it). Bad input (missing
+calibration, fewer than 20 samples per drive period, clipped signal, NaN, not a trace file, a
+sweep without `row`) prints `error: ...` and exits with status 2.
 """
 
 from __future__ import annotations
@@ -20,6 +24,8 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 
 from afmlearn.identify.infer import identify_trace
+from afmlearn.identify.joint_outputs import format_exponent
+from afmlearn.plots.identify import identify_figures
 
 
 @hydra.main(config_path="../conf", config_name="identify", version_base="1.3")
@@ -28,14 +34,15 @@ def main(cfg: DictConfig) -> None:
     try:
         identifier = instantiate(cfg.identifier)
         result = identify_trace(cfg.trace, cfg.out_dir, row=cfg.row, identifier=identifier,
-                                figures=bool(cfg.figures))
+                                figures=identify_figures if cfg.figures else None)
     except ValueError as err:  # InputError, TraceFormatError and bad settings are ValueErrors
         print(f"error: {err}", file=sys.stderr)
         sys.exit(2)
     summary = result["summary"]
     print(result["equation"])
     print(result["equation_si"])
-    for key in ("interaction_exponent", "peak_repulsive_force_n", "dissipated_energy_per_cycle_j",
+    print(format_exponent(summary))
+    for key in ("peak_repulsive_force_n", "dissipated_energy_per_cycle_j",
                 "contact_time_s", "state_accuracy_heldout"):
         value = summary.get(key)
         print(f"{key:<30}  {value:.6g}" if isinstance(value, float) else f"{key:<30}  {value}")

@@ -20,13 +20,14 @@ import hydra
 from omegaconf import DictConfig
 
 from afmlearn.identify.train import train
+from afmlearn.plots.identify import training_figures
 
 
 @hydra.main(config_path="../conf", config_name="train_sindy", version_base="1.3")
 def main(cfg: DictConfig) -> float:
     """Run :func:`afmlearn.identify.train.train`; return the mean whole-trace force accuracy."""
     try:
-        metrics, objects = train(cfg)
+        metrics, objects = train(cfg, figures=training_figures)
     except ValueError as err:  # InputError, TraceFormatError and bad settings are ValueErrors
         print(f"error: {err}", file=sys.stderr)
         sys.exit(2)

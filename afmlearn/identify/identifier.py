@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize, minimize_scalar
 from sklearn.base import clone
 
-from afmlearn.io import Trace
+from afmlearn.io import Experiment, Trace
 from afmlearn.metrics import nrmse
 from afmlearn.preprocess import (
     Calibrated,
@@ -49,6 +49,15 @@ from afmlearn.preprocess import (
 )
 
 from .constraints import CalibrationConstraints
+from .drive import AbstractDrivePhase
+from .joint import (
+    Bagging,
+    ContactOnsetProfile,
+    ExponentProfile,
+    OrbitOffsets,
+    Refinement,
+    SupportSelection,
+)
 from .library import (
     AFMLibrary,
     ExponentialDamping,
@@ -62,19 +71,21 @@ from .library._kernel import force_series
 from .model import IdentifiedModel
 from .optimizers import BoxSR3
 from .projection import AbstractProjection, Denoised, HarmonicBalance, RegressionData
-from .selection import Candidate, GridSearch, best_by_ic, pareto_front
+from .selection import Candidate, GridSearch, best_by_ic
+from .selection import knee_one_se as _knee_on_front
+from .selection import merge_supports as _merge
+from .selection import profile_interval as _profile_interval
 from .stepwise import ForwardSelection, cv_errors
+from .summary import force_vs_gap, summarize
 from .weak import WeakForm
 
-__all__ = ["ForceIdentifier", "LINEAR_TERMS"]
+__all__ = ["ForceIdentifier", "LINEAR_TERMS", "force_vs_gap", "summarize"]
 
 FloatArray = NDArray[np.float64]
 
 #: names of the four lever/drive columns that precede the force terms
 LINEAR_TERMS = ("x'", "x", "cos(Omega tau)", "sin(Omega tau)")
 _N_LIN = 4
-#: relative CV improvement below which extra terms are never worth it (see _knee_on_front)
-_PRACTICAL = 0.01
 
 
 @final
@@ -137,6 +148,12 @@ class ForceIdentifier:
         Physical range of the contact onset ``a0`` in metres (an intermolecular distance;
         default 0.1 to 3 nm), converted with the trace's rest gap; None: only the orbit's
         own scale bounds ``a0`` (0.1 % to 30 % of the gap span).
+    drive_phase : AbstractDrivePhase, optional
+        How each observation's drive phase enters a joint fit: :class:`RecordedPhase`
+        (default: the file's ``drive_phase_rad`` with a 0.01 rad prior where recorded, fitted
+        elsewhere) or :class:`FittedPhase` (always fitted).
+    exponent_profile : ExponentProfile, optional
+        Range and steps of the contact exponent's profile likelihood in a joint fit.
     seed : int
         Seed of the bootstrap.
     progress : bool
@@ -179,6 +196,8 @@ class ForceIdentifier:
                  max_terms: int = 6, max_heldout_periods: float = 60.0,
                  substeps: int | None = None, physical_signs: bool = True,
                  a0_range_m: tuple[float, float] | None = (0.1e-9, 3.0e-9),
+                 drive_phase: AbstractDrivePhase | None = None,
+                 exponent_profile: ExponentProfile | None = None,
                  seed: int = 0, progress: bool = False) -> None:
         self.library = library
         self.projection = projection
@@ -197,6 +216,8 @@ class ForceIdentifier:
         self.substeps = substeps
         self.physical_signs = physical_signs
         self.a0_range_m = a0_range_m
+        self.drive_phase = drive_phase
+        self.exponent_profile = exponent_profile
         self.seed = seed
         self.progress = progress
 
@@ -207,6 +228,14 @@ class ForceIdentifier:
         if self.projection is not None and not isinstance(self.projection, AbstractProjection):
             raise ValueError(f"projection must be HarmonicBalance or WeakForm, "
                              f"got {self.projection!r}")
+        if self.drive_phase is not None and not isinstance(self.drive_phase,
+                                                           AbstractDrivePhase):
+            raise ValueError(f"drive_phase must be RecordedPhase or FittedPhase, "
+                             f"got {self.drive_phase!r}")
+        if self.exponent_profile is not None and not isinstance(self.exponent_profile,
+                                                                ExponentProfile):
+            raise ValueError(f"exponent_profile must be an ExponentProfile, "
+                             f"got {self.exponent_profile!r}")
         if not (isinstance(self.n_folds, int) and self.n_folds >= 2):
             raise ValueError(f"n_folds must be an integer >= 2, got {self.n_folds!r}")
         if self.a0_range_m is not None:
@@ -231,27 +260,114 @@ class ForceIdentifier:
             import time
             print(f"[identify {time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
 
+    # ------------------------------------------------------------------ joint fit
+    def fit_joint(self, data: Experiment | Trace) -> ForceIdentifier:
+        """The joint pipeline on any experiment, also one of a single steady observation.
+
+        :meth:`fit` uses it for experiments of several observations; this entry point lets a
+        single orbit be fitted the same way (side-by-side benchmarks on the same method).
+        """
+        self._check()
+        obs = list(data) if isinstance(data, Experiment) else [data]
+        if len(obs) == 1 and obs[0].deflection_m is not None \
+                and obs[0].deflection_m.ndim == 2:
+            obs = list(Experiment.from_trace(obs[0]))
+        return self._fit_joint(obs)
+
+    def _fit_joint(self, traces: list[Trace]) -> ForceIdentifier:
+        """Joint fit of several steady observations: problem, stages, outputs (no state)."""
+        from .joint import fit_joint
+        from .joint_outputs import joint_force, joint_model, joint_summary
+        from .problem import build_problem
+
+        self.warnings_ = []
+        library = AFMLibrary.standard() if self.library is None else self.library
+        if self.projection is not None and not isinstance(self.projection, HarmonicBalance):
+            raise ValueError("a joint fit of steady observations uses HarmonicBalance; got "
+                             f"{type(self.projection).__name__}")
+        self._log(f"joint fit of {len(traces)} observations")
+        problem = build_problem(
+            traces, constraints=self.constraints or CalibrationConstraints(),
+            n_blocks=self.n_folds + 1, max_harmonics=self.max_harmonics,
+            min_harmonics=self.min_harmonics, projection=self.projection or HarmonicBalance(),
+            physical_signs=self.physical_signs,
+            a0_range_m=None if self.a0_range_m is None else tuple(self.a0_range_m))
+        if problem.drive_amplitude is None:
+            self.warnings_.append("no free data (free_deflection_m or free_amplitude_m): the "
+                                  "drive amplitude is not constrained")
+        res = fit_joint(problem, library, drive=self.drive_phase,
+                        onset=ContactOnsetProfile(n_a0=self.n_a0),
+                        selection=SupportSelection(max_terms=self.max_terms),
+                        refinement=Refinement() if self.refine else None,
+                        bagging=Bagging(n_bootstrap=self.n_bootstrap, seed=self.seed),
+                        exponent=self.exponent_profile or ExponentProfile(),
+                        offsets=OrbitOffsets(), log=self._log)
+        n_lin = res.problem.n_lin
+        bands = (None if res.samples.shape[0] < 5
+                 else np.percentile(res.samples[:, n_lin:], [2.5, 97.5], axis=0))
+        chosen = res.candidates[res.knee_index]
+        self.model_ = joint_model(res, res.coef, res.library, res.a0, bands=bands, info={
+            "n_terms": chosen.n_terms, "cv_error": chosen.cv_error,
+            "projection": "HarmonicBalance", "periodic": True, "joint": True,
+            "n_observations": res.problem.n_obs})
+        self.ic_model_ = joint_model(res, res.ic_coef, res.selection_library,
+                                     res.selection_a0)
+        forces = joint_force(res)
+        self.joint_ = res
+        self.candidates_ = res.candidates
+        self.knee_index_, self.ic_index_ = res.knee_index, res.ic_index
+        self.objectives_ = ("cv_error",)
+        self.search_ = None
+        self.a0_profile_ = res.a0_profile
+        self.refined_ = res.refined
+        self.periodic_ = True
+        self.projection_ = self.projection or HarmonicBalance()
+        self.force_, self.force_lo_, self.force_hi_ = forces["force"], forces["lo"], forces["hi"]
+        self.state_x_, self.state_v_ = forces["x"], forces["v"]
+        self.heldout_start_ = int(forces["x"].shape[1])  # nothing held out: CV over blocks
+        self.exponent_profile_ = None if res.exponent is None else res.exponent["profile"]
+        self.summary_ = joint_summary(res, self.model_, forces)
+        self.drive_phase_candidates_ = []
+        return self
+
     # ------------------------------------------------------------------ fit
-    def fit(self, data: Trace | Calibrated, *, row: int | None = None,
+    def fit(self, data: Experiment | Trace | Calibrated, *, row: int | None = None,
             true_force: FloatArray | None = None) -> ForceIdentifier:
-        """Identify the force of one trace (or one row of a sweep).
+        """Identify ONE force law from an experiment (all its observations jointly).
 
         Parameters
         ----------
-        data : Trace or Calibrated
-            The recording; a Trace is checked (``afmlearn.preprocess.check_trace``) and
-            calibrated. Its labels are never read.
+        data : Experiment, Trace or Calibrated
+            An ``afmlearn.io.Experiment`` with several steady observations (a set-point
+            series) is fitted jointly (:mod:`afmlearn.identify.joint`): shared ``a0``,
+            exponents and coefficients, a drive phase per observation. A Trace is wrapped as
+            an experiment (a series file's rows are its observations); an experiment of one
+            observation (a single trace, a ramp, one row) is fitted by the single-orbit
+            pipeline. Labels are never read.
         row : int, optional
-            Row of a sweep.
+            Row of a sweep or series: identify that row alone.
         true_force : ndarray, shape (n,), optional
-            The true ``F_ts`` [k L_ref] (training on simulations only): adds the force error
-            to the Pareto front.
+            The true ``F_ts`` [k L_ref] (single-orbit training on simulations only): adds the
+            force error to the Pareto front.
 
         Returns
         -------
         self
         """
         self._check()
+        obs = None
+        if isinstance(data, Experiment):
+            obs = list(data)
+        elif isinstance(data, Trace) and data.deflection_m.ndim == 2 and row is None \
+                and data.is_series:
+            obs = list(Experiment.from_trace(data))
+        if obs is not None and len(obs) > 1:
+            if true_force is not None:
+                raise ValueError("true_force is for single-orbit training; a joint fit takes "
+                                 "none")
+            return self._fit_joint(obs)
+        if obs is not None:
+            data = obs[0]
         if isinstance(data, Trace):
             check_trace(data, row=row)
             cal = calibrate(data, row=row)
@@ -931,8 +1047,11 @@ class ForceIdentifier:
         self.exponent_profile_ = self._exponent_profile(model, self.summary_)
         if self.exponent_profile_ is not None:
             n_rows = self._design(self._lib_final, model.a0).y.size
-            self.summary_["interaction_exponent_interval"] = _profile_interval(
-                self.exponent_profile_, n_rows)
+            iv = _profile_interval(self.exponent_profile_, n_rows)
+            self.summary_["interaction_exponent_interval"] = iv
+            grid = self.exponent_profile_[:, 0]
+            self.summary_["interaction_exponent_bounded"] = bool(
+                iv[0] > grid.min() + 1e-9 and iv[1] < grid.max() - 1e-9)
         if true_force is not None:
             self.summary_["force_nrmse_vs_truth"] = float(nrmse(force, true_force))
 
@@ -940,129 +1059,3 @@ class ForceIdentifier:
     @property
     def equation_(self) -> str:
         return self.model_.equation()
-
-
-def _knee_on_front(cands: list[Candidate], objectives: tuple[str, ...]) -> int:
-    """The knee: the sparsest front member within one standard error of the best CV error.
-
-    The front is the Pareto front of ``(n_terms, *objectives)``. On it, the choice is the
-    one-standard-error rule (Hastie, Tibshirani & Friedman, section 7.10) with paired folds:
-    the fewest terms whose fold errors exceed the best candidate's by at most one standard
-    error of the paired difference (the folds share their noise, so pairing removes the
-    block-to-block scatter common to every candidate), or by at most 1 % per term it drops
-    (`_PRACTICAL`), and this against every denser member of the front, not only the best
-    (a dense best would otherwise excuse dropping a real term). The per-term tolerance is
-    there because the denoised state is one estimate shared by every fold (and, on nearly
-    noiseless data, a truncated series), so its error is a systematic residual that
-    cross-validation cannot tell from signal; dense models fit part of it and look
-    "significant" by a few per cent. Measured on a Lennard-Jones orbit (1 % noise):
-    13 terms beat the true single ``z^-2`` by 2 % in CV error at equal force accuracy.
-    This is where the error curve stops falling beyond its own noise. (Kneedle's geometric
-    elbow, ``selection.knee_point``, stops after the first contact term, because one term
-    removes most of the error; the second, e.g. the adhesion, is still far outside the
-    noise.) Ties go to the lower CV error.
-    """
-    pts = np.array([[c.n_terms, *[c.objective(o) for o in objectives]] for c in cands])
-    front = [int(i) for i in pareto_front(pts)]
-    best = min(front, key=lambda i: cands[i].cv_error)
-
-    def as_good(i: int, j: int) -> bool:
-        """Candidate ``i`` is within tolerance of the denser candidate ``j``."""
-        d = cands[i].fold_errors - cands[j].fold_errors
-        if d.size < 2 or not np.all(np.isfinite(d)):
-            return i == j
-        extra = max(cands[j].n_terms - cands[i].n_terms, 1)
-        tol = max(float(d.std(ddof=1)) / np.sqrt(d.size),
-                  _PRACTICAL * extra * float(cands[j].fold_errors.mean()))
-        return float(d.mean()) <= tol
-
-    def within(i: int) -> bool:
-        # as good as every denser front member: no added term may buy more than the
-        # tolerance per term (else a dense best would excuse dropping a real term)
-        return all(as_good(i, j) for j in front
-                   if cands[j].n_terms > cands[i].n_terms) or i == best
-
-    ok = [i for i in front if within(i)]
-    return min(ok, key=lambda i: (cands[i].n_terms, cands[i].cv_error))
-
-
-def _profile_interval(profile: FloatArray, n_rows: int,
-                      level: float = 3.841) -> tuple[float, float]:
-    """Profile-likelihood interval of a parameter from its residual profile.
-
-    ``profile`` shape (n, 2): ``(value, RSS)``. With Gaussian rows the likelihood-ratio
-    statistic is ``n_rows log(RSS / RSS_min)``; values with it below ``level`` (3.841: 95 %
-    for one parameter, chi-square) form the interval (its ends are the extreme grid values
-    inside, so an interval reaching the grid's ends means "not bounded by the data").
-    """
-    v, r = profile[:, 0], profile[:, 1]
-    ok = np.isfinite(r)
-    if not ok.any():
-        return (math.nan, math.nan)
-    lr = n_rows * np.log(r[ok] / r[ok].min())
-    inside = v[ok][lr <= level]
-    return (float(inside.min()), float(inside.max()))
-
-
-def _merge(*groups: list[Candidate]) -> list[Candidate]:
-    """One candidate per distinct support (lowest cv_error), sorted by (n_terms, cv_error)."""
-    best: dict[bytes, Candidate] = {}
-    for group in groups:
-        for c in group:
-            key = np.packbits(c.support).tobytes()
-            if key not in best or c.cv_error < best[key].cv_error:
-                best[key] = c
-    return sorted(best.values(), key=lambda c: (c.n_terms, c.cv_error))
-
-
-def summarize(model: IdentifiedModel, *, z: FloatArray, zdot: FloatArray, force: FloatArray,
-              cal: Calibrated, state_error: float) -> dict[str, Any]:
-    """Physical outputs of an identified model on its orbit (dimensionless and SI)."""
-    sc = cal.scales
-    spp = cal.samples_per_period
-    n = force.size
-    n_per = n / spp
-    dtau = float(cal.tau[1] - cal.tau[0])
-    # energy delivered to the sample per cycle: -oint F dz = -int F z' dtau
-    e_diss = float(-np.sum(force * zdot) * dtau / n_per)
-    contact = z <= model.a0
-    expo = None
-    best = 0.0
-    for c, t in zip(model.coefficients, model.library.terms, strict=True):
-        if isinstance(t, Indentation):
-            contrib = abs(c) * float(np.sqrt(np.mean(t.evaluate(
-                TermInput(z=z, zdot=zdot, x=model.gap - z, a0=model.a0)) ** 2)))
-            if contrib > best:
-                best, expo = contrib, float(t.p)
-    period_s = 1.0 / (cal.omega * sc.resonance_frequency)
-    return {
-        "interaction_exponent": expo,
-        "a0": model.a0, "a0_m": model.a0 * sc.length,
-        "dissipated_energy_per_cycle": e_diss,
-        "dissipated_energy_per_cycle_j": e_diss * sc.energy,
-        "peak_repulsive_force": float(max(np.max(force), 0.0)),
-        "peak_repulsive_force_n": float(max(np.max(force), 0.0)) * sc.force,
-        "peak_attractive_force_n": float(min(np.min(force), 0.0)) * sc.force,
-        "contact_fraction": float(np.mean(contact)),
-        "contact_time_s": float(np.mean(contact)) * period_s,
-        "state_error_heldout": state_error,
-        "state_accuracy_heldout": 1.0 - state_error,
-    }
-
-
-def force_vs_gap(z: FloatArray, zdot: FloatArray, force: FloatArray, *, n_bins: int = 200
-                 ) -> dict[str, FloatArray]:
-    """Force against gap on approach (``z' < 0``) and retraction (``z' > 0``), binned means.
-
-    Returns arrays of shape (n_bins,): ``gap`` (bin centres) and ``approach``/``retract``
-    (NaN in empty bins).
-    """
-    edges = np.linspace(np.min(z), np.max(z), n_bins + 1)
-    centres = 0.5 * (edges[1:] + edges[:-1])
-    out: dict[str, FloatArray] = {"gap": centres}
-    for key, m in (("approach", zdot < 0), ("retract", zdot >= 0)):
-        idx = np.clip(np.digitize(z[m], edges) - 1, 0, n_bins - 1)
-        s = np.bincount(idx, weights=force[m], minlength=n_bins)
-        c = np.bincount(idx, minlength=n_bins)
-        out[key] = np.where(c > 0, s / np.maximum(c, 1), np.nan)
-    return out

@@ -18,9 +18,12 @@ atomically: temporary sibling + ``os.replace``):
     the force is undefined and, for a sweep, in every row but the identified one),
     ``force_lo_n`` / ``force_hi_n`` (95 % bagging band), ``gap_m`` (instantaneous tip--sample
     gap of the denoised orbit, same shape) and ``time_s`` (n,); units in attributes.
-``pareto.png``, ``coefficients.png``, ``orbit.png``, ``force.png``
-    Figures (:mod:`afmlearn.plots.identify`), unless ``figures=False``.
+Figures are the caller's (``figures``: a callable, e.g.
+:func:`afmlearn.plots.identify.identify_figures` from ``scripts/identify.py``): this module never
+imports :mod:`afmlearn.plots`.
 
+Set-point series (a 2-D ``deflection_m`` with one rest gap per row): ALL rows are identified
+jointly (one force law; :mod:`afmlearn.identify.joint`) unless ``row`` picks one.
 Sweeps: one row is identified; ``row`` is then required (a ValueError lists the valid range).
 The row cannot be chosen from the data without identifying every row, and picking one silently
 would hide which drive frequency the result belongs to.
@@ -31,6 +34,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -38,22 +42,26 @@ import h5py
 import numpy as np
 
 import afmlearn
-from afmlearn.io import Trace, jsonable, read_trace, write_json
+from afmlearn.io import Experiment, Trace, jsonable, read_trace, write_json
 from afmlearn.io._atomic import atomic_path
 from afmlearn.preprocess import Calibrated, calibrate, check_trace, checked_row
 
 from .identifier import LINEAR_TERMS, ForceIdentifier
 from .library import AFMLibrary
 
-__all__ = ["identify_trace", "candidates_table", "calibration_record", "write_force_h5",
-           "write_json", "jsonable", "RESULT_FORMAT"]
+__all__ = ["identify_trace", "identify_and_describe", "candidates_table", "calibration_record",
+           "write_force_h5", "write_series_force_h5", "write_json", "jsonable", "RESULT_FORMAT"]
 
 RESULT_FORMAT = "afmlearn-identify-result"
 
 
+#: ``figures(identifier, calibrated, out_dir) -> {name: path}`` (the script layer's plots)
+FigureWriter = Callable[[ForceIdentifier, Calibrated, Path], dict[str, str]]
+
+
 def identify_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
                    row: int | None = None, identifier: ForceIdentifier | None = None,
-                   figures: bool = True) -> dict[str, Any]:
+                   figures: FigureWriter | None | bool = None) -> dict[str, Any]:
     """Identify the force of one trace file (one row of a sweep) and write the results.
 
     Parameters
@@ -63,12 +71,15 @@ def identify_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]
     out_dir : str or os.PathLike
         Output folder (created if missing); existing result files are replaced.
     row : int, optional
-        Row of a sweep, in ``[0, n_points)``; required for sweeps, must be None otherwise.
+        Row of a sweep, in ``[0, n_points)``; required for sweeps. For a set-point series
+        None (default) identifies all rows jointly and ``row=i`` row ``i`` alone; must be None
+        for a single trace.
     identifier : ForceIdentifier, optional
         Settings (unfitted; it is cloned by reference, i.e. fitted in place); default
         ``ForceIdentifier()``.
-    figures : bool
-        Also write the PNG figures.
+    figures : callable, optional
+        ``figures(identifier, calibrated, out_dir)`` writes figures and returns their paths
+        (None or False: no figures).
 
     Returns
     -------
@@ -90,34 +101,111 @@ def identify_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]
     path = Path(path)
     out = Path(out_dir)
     trace = read_trace(path)                      # labels=False: /labels is never opened
-    row = checked_row(trace, row)
     ide = identifier if identifier is not None else ForceIdentifier()
     if not isinstance(ide, ForceIdentifier):
         raise ValueError(f"identifier must be a ForceIdentifier, got {type(ide).__name__}")
-    check_trace(trace, row=row)
-    cal = calibrate(trace, row=row)
+    if getattr(trace, "is_series", False):
+        if row is None:
+            return _identify_series(trace, out, ide, input_path=path, figures=figures,
+                                    t0=t0)
+        if isinstance(row, bool) or not isinstance(row, int | np.integer) \
+                or not 0 <= int(row) < trace.n_points:
+            raise ValueError(f"row must be null (all rows jointly) or an integer in "
+                             f"[0, {trace.n_points}) for a set-point series, got {row!r}")
+        row = int(row)
+        single = trace.row(row)
+        check_trace(single)
+        cal = calibrate(single)
+    else:
+        row = checked_row(trace, row)
+        check_trace(trace, row=row)
+        cal = calibrate(trace, row=row)
     ide.fit(cal)
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, str] = {}
     files["model"] = str(ide.model_.save(out / "model.json"))
     files["force"] = str(write_force_h5(out / "force.h5", ide, cal, trace, row=row))
     if figures:
-        from afmlearn.plots.identify import (
-            plot_coefficients,
-            plot_force,
-            plot_orbit,
-            plot_pareto,
-        )
-        files["pareto"] = str(plot_pareto(ide, out / "pareto.png"))
-        files["coefficients"] = str(plot_coefficients(ide.model_, None,
-                                                      out / "coefficients.png"))
-        files["orbit"] = str(plot_orbit(ide, cal.x, out / "orbit.png", calibrated=cal))
-        files["force_figure"] = str(plot_force(ide, out / "force.png", calibrated=cal))
+        files.update(figures(ide, cal, out))
     result = result_record(ide, cal, input_path=path, row=row,
                            runtime_s=time.perf_counter() - t0)
     result["files"] = {**files, "result": str(out / "result.json")}
     write_json(out / "result.json", result)
     return {**result, "identifier": ide}
+
+
+def identify_and_describe(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
+                          row: int | None = None,
+                          identifier: ForceIdentifier | None = None) -> str:
+    """Identify a trace or set-point series file and return the lines to show a user.
+
+    :func:`identify_trace` (a series: every row jointly), then the equation (dimensionless
+    and SI) and the contact exponent with its 95 % profile-likelihood interval, saying so
+    when the data do not bound it. The demo prints the returned text.
+    """
+    from .joint_outputs import format_exponent
+
+    res = identify_trace(path, out_dir, row=row, identifier=identifier)
+    n = res.get("joint", {}).get("n_observations", 1)
+    head = (f"joint fit of {n} set-points (one force law)" if n > 1
+            else "single-orbit fit")
+    return "\n".join([head, res["equation"], res["equation_si"],
+                      format_exponent(res["summary"])])
+
+
+def _identify_series(trace: Trace, out: Path, ide: ForceIdentifier, *,
+                     input_path: str | os.PathLike[str], figures: FigureWriter | None | bool,
+                     t0: float) -> dict[str, Any]:
+    """All rows of a set-point series jointly: fit, then write the same files."""
+    exp = Experiment.from_trace(trace)
+    ide.fit(exp)
+    cal = ide.joint_.problem.observations[0].calibrated
+    out.mkdir(parents=True, exist_ok=True)
+    files: dict[str, str] = {"model": str(ide.model_.save(out / "model.json"))}
+    files["force"] = str(write_series_force_h5(out / "force.h5", ide, trace))
+    if figures:
+        files.update(figures(ide, cal, out))
+    result = result_record(ide, cal, input_path=input_path, row=None,
+                           runtime_s=time.perf_counter() - t0)
+    result["joint"] = {"n_observations": len(exp),
+                       "rest_gaps_m": np.asarray(exp.gaps_m, float).tolist(),
+                       "length_unit_m": ide.joint_.problem.length_m,
+                       "offsets": ide.joint_.problem.offsets.tolist(),
+                       "phase": jsonable(ide.joint_.phase_info)}
+    result["files"] = {**files, "result": str(out / "result.json")}
+    write_json(out / "result.json", result)
+    return {**result, "identifier": ide}
+
+
+def write_series_force_h5(path: str | os.PathLike[str], ide: ForceIdentifier, trace: Trace
+                          ) -> Path:
+    """Force of a joint fit aligned with a series' ``deflection_m`` (n_points, n), atomically."""
+    sc = ide.model_.scales
+    n = trace.n_samples
+    z = np.asarray(ide.joint_.problem.length_m, float)
+    gaps = np.array([o.gap for o in ide.joint_.problem.observations])
+    series = {
+        "force_n": np.asarray(ide.force_, float) * sc.force,
+        "force_lo_n": np.asarray(ide.force_lo_, float) * sc.force,
+        "force_hi_n": np.asarray(ide.force_hi_, float) * sc.force,
+        "gap_m": (gaps[:, None] - np.asarray(ide.state_x_, float)) * z,
+    }
+    path = Path(path)
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        for key, value in series.items():
+            assert value.shape == trace.deflection_m.shape, (key, value.shape)
+            ds = f.create_dataset(key, data=value)
+            ds.attrs["unit"] = "m" if key == "gap_m" else "N"
+        ds = f.create_dataset("time_s", data=np.arange(n) / trace.sample_rate_hz)
+        ds.attrs["unit"] = "s"
+        f.attrs["format"] = "afmlearn-force"
+        f.attrs["afmlearn_version"] = afmlearn.__version__
+        f.attrs["row"] = -1
+        f.attrs["joint"] = True
+        f.attrs["equation"] = ide.model_.equation()
+        f.attrs["equation_si"] = ide.model_.equation_si()
+        f.attrs["nan_means"] = "force band undefined (no bootstrap)"
+    return path
 
 
 # ---------------------------------------------------------------------------- records

@@ -96,8 +96,13 @@ class Bound(abc.ABC):
     linear: FloatArray
 
     @abc.abstractmethod
-    def force_columns(self, library: AFMLibrary, a0: float) -> FloatArray:
-        """``[theta_j]`` for every library term, shape (n_rows, n_terms)."""
+    def force_columns(self, library: AFMLibrary, a0: float, *,
+                      gap_shift: float = 0.0) -> FloatArray:
+        """``[theta_j]`` for every library term, shape (n_rows, n_terms).
+
+        ``gap_shift`` (/ L_ref) is added to the gap the terms see (a per-observation orbit
+        offset of a joint fit); strategies without it raise for a nonzero shift.
+        """
 
     @property
     def n_rows(self) -> int:
@@ -194,8 +199,9 @@ class _BoundHarmonic(Bound):
         out = np.concatenate([c2.real, c2[1:].imag], axis=0)
         return out if c.ndim == 2 else out[:, 0]
 
-    def force_columns(self, library: AFMLibrary, a0: float) -> FloatArray:
-        s = TermInput(z=self._gap - self._x, zdot=-self._v, x=self._x, a0=a0)
+    def force_columns(self, library: AFMLibrary, a0: float, *,
+                      gap_shift: float = 0.0) -> FloatArray:
+        s = TermInput(z=self._gap + gap_shift - self._x, zdot=-self._v, x=self._x, a0=a0)
         th = library.evaluate(s)
         spec = np.fft.rfft(th, axis=0)[: self.nh + 1] / self._m
         spec[1:] *= 2.0  # theta = Re sum_n T_n e^{i n phi}

@@ -19,6 +19,7 @@ criteria lean to richer models: use them as a second opinion beside the knee.
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -37,8 +38,11 @@ __all__ = [
     "default_nu_grid",
     "default_threshold_grid",
     "knee",
+    "knee_one_se",
     "knee_point",
+    "merge_supports",
     "pareto_front",
+    "profile_interval",
     "rolling_blocks",
 ]
 
@@ -405,3 +409,80 @@ class GridSearch:
         self.n_terms_grid_ = np.array([c.n_terms for c in cands]).reshape(K, V)
         self.blocks_ = blocks
         return self
+
+
+#: relative CV improvement below which extra terms are never worth it (see knee_one_se)
+_PRACTICAL = 0.01
+
+
+def knee_one_se(cands: list[Candidate], objectives: tuple[str, ...]) -> int:
+    """The knee: the sparsest front member within one standard error of the best CV error.
+
+    The front is the Pareto front of ``(n_terms, *objectives)``. On it, the choice is the
+    one-standard-error rule (Hastie, Tibshirani & Friedman, section 7.10) with paired folds:
+    the fewest terms whose fold errors exceed the best candidate's by at most one standard
+    error of the paired difference (the folds share their noise, so pairing removes the
+    block-to-block scatter common to every candidate), or by at most 1 % per term it drops
+    (`_PRACTICAL`), and this against every denser member of the front, not only the best
+    (a dense best would otherwise excuse dropping a real term). The per-term tolerance is
+    there because the denoised state is one estimate shared by every fold (and, on nearly
+    noiseless data, a truncated series), so its error is a systematic residual that
+    cross-validation cannot tell from signal; dense models fit part of it and look
+    "significant" by a few per cent. Measured on a Lennard-Jones orbit (1 % noise):
+    13 terms beat the true single ``z^-2`` by 2 % in CV error at equal force accuracy.
+    This is where the error curve stops falling beyond its own noise. (Kneedle's geometric
+    elbow, ``selection.knee_point``, stops after the first contact term, because one term
+    removes most of the error; the second, e.g. the adhesion, is still far outside the
+    noise.) Ties go to the lower CV error.
+    """
+    pts = np.array([[c.n_terms, *[c.objective(o) for o in objectives]] for c in cands])
+    front = [int(i) for i in pareto_front(pts)]
+    best = min(front, key=lambda i: cands[i].cv_error)
+
+    def as_good(i: int, j: int) -> bool:
+        """Candidate ``i`` is within tolerance of the denser candidate ``j``."""
+        d = cands[i].fold_errors - cands[j].fold_errors
+        if d.size < 2 or not np.all(np.isfinite(d)):
+            return i == j
+        extra = max(cands[j].n_terms - cands[i].n_terms, 1)
+        tol = max(float(d.std(ddof=1)) / np.sqrt(d.size),
+                  _PRACTICAL * extra * float(cands[j].fold_errors.mean()))
+        return float(d.mean()) <= tol
+
+    def within(i: int) -> bool:
+        # as good as every denser front member: no added term may buy more than the
+        # tolerance per term (else a dense best would excuse dropping a real term)
+        return all(as_good(i, j) for j in front
+                   if cands[j].n_terms > cands[i].n_terms) or i == best
+
+    ok = [i for i in front if within(i)]
+    return min(ok, key=lambda i: (cands[i].n_terms, cands[i].cv_error))
+
+
+def merge_supports(*groups: list[Candidate]) -> list[Candidate]:
+    """One candidate per distinct support (lowest cv_error), sorted by (n_terms, cv_error)."""
+    best: dict[bytes, Candidate] = {}
+    for group in groups:
+        for c in group:
+            key = np.packbits(c.support).tobytes()
+            if key not in best or c.cv_error < best[key].cv_error:
+                best[key] = c
+    return sorted(best.values(), key=lambda c: (c.n_terms, c.cv_error))
+
+
+def profile_interval(profile: NDArray, n_rows: int,
+                      level: float = 3.841) -> tuple[float, float]:
+    """Profile-likelihood interval of a parameter from its residual profile.
+
+    ``profile`` shape (n, 2): ``(value, RSS)``. With Gaussian rows the likelihood-ratio
+    statistic is ``n_rows log(RSS / RSS_min)``; values with it below ``level`` (3.841: 95 %
+    for one parameter, chi-square) form the interval (its ends are the extreme grid values
+    inside, so an interval reaching the grid's ends means "not bounded by the data").
+    """
+    v, r = profile[:, 0], profile[:, 1]
+    ok = np.isfinite(r)
+    if not ok.any():
+        return (math.nan, math.nan)
+    lr = n_rows * np.log(r[ok] / r[ok].min())
+    inside = v[ok][lr <= level]
+    return (float(inside.min()), float(inside.max()))

@@ -42,7 +42,7 @@ import copy
 import logging
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -78,13 +78,18 @@ EXPONENT_TOLERANCE = 0.25
 
 
 # ---------------------------------------------------------------------------- public API
-def train(cfg: DictConfig) -> tuple[dict[str, float], dict[str, Any]]:
+def train(cfg: DictConfig, *, figures: Callable[..., dict[str, str]] | None = None
+          ) -> tuple[dict[str, float], dict[str, Any]]:
     """Simulate, identify and score every scenario of ``cfg.train.scenarios``.
 
     Parameters
     ----------
     cfg : omegaconf.DictConfig
         Composed from ``conf/train_sindy.yaml`` (left unchanged).
+    figures : callable, optional
+        ``figures(identifier, calibrated, folder, *, truth_si, true_force) -> {name: path}``
+        (e.g. :func:`afmlearn.plots.identify.training_figures`, passed by the script; this
+        module never imports the plots); skipped when ``train.figures`` is false.
 
     Returns
     -------
@@ -109,7 +114,8 @@ def train(cfg: DictConfig) -> tuple[dict[str, float], dict[str, Any]]:
     cfg = _checked(cfg)
     out = _output_dir(cfg)
     out.mkdir(parents=True, exist_ok=True)
-    figures = bool(OmegaConf.select(cfg, "train.figures", default=True))
+    if not OmegaConf.select(cfg, "train.figures", default=True):
+        figures = None
     flat: dict[str, float] = {}
     records: dict[str, Any] = {}
     runs: dict[str, Any] = {}
@@ -178,7 +184,8 @@ def _simulation_cfg(cfg: DictConfig, name: str, trace_path: Path) -> DictConfig:
 
 
 # ---------------------------------------------------------------------------- one scenario
-def _run_scenario(cfg: DictConfig, name: str, folder: Path, *, figures: bool) -> dict[str, Any]:
+def _run_scenario(cfg: DictConfig, name: str, folder: Path, *,
+                  figures: Callable[..., dict[str, str]] | None) -> dict[str, Any]:
     t0 = time.perf_counter()
     folder.mkdir(parents=True, exist_ok=True)
     sim_metrics, _ = simulate(_simulation_cfg(cfg, name, folder / "trace.h5"))
@@ -201,19 +208,9 @@ def _run_scenario(cfg: DictConfig, name: str, folder: Path, *, figures: bool) ->
                    model_json=labels.model, scales=sc)
     record["simulation"] = {k: v for k, v in sim_metrics.items() if k != "output"}
     files = {"trace": str(path), "model": str(ide.model_.save(folder / "model.json"))}
-    if figures:
-        from afmlearn.plots.identify import (
-            plot_coefficients,
-            plot_force,
-            plot_orbit,
-            plot_pareto,
-        )
-        files["pareto"] = str(plot_pareto(ide, folder / "pareto.png"))
-        files["coefficients"] = str(plot_coefficients(ide.model_, record["truth_si_by_est"],
-                                                      folder / "coefficients.png"))
-        files["orbit"] = str(plot_orbit(ide, cal.x, folder / "orbit.png", calibrated=cal))
-        files["force_figure"] = str(plot_force(ide, folder / "force.png", true_force,
-                                               calibrated=cal))
+    if figures is not None:
+        files.update(figures(ide, cal, folder, truth_si=record["truth_si_by_est"],
+                             true_force=true_force))
     record["runtime_s"] = time.perf_counter() - t0
     result = result_record(ide, cal, input_path=path, row=None, runtime_s=record["runtime_s"])
     files["result"] = str(write_json(folder / "result.json", result))

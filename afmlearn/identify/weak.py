@@ -119,9 +119,10 @@ class _BoundWeak(Bound):
         self._state = data.denoised
         self._gap = data.gap
 
-    def force_columns(self, library: AFMLibrary, a0: float) -> FloatArray:
+    def force_columns(self, library: AFMLibrary, a0: float, *,
+                      gap_shift: float = 0.0) -> FloatArray:
         d = self._state
-        s = TermInput(z=self._gap - d.x, zdot=-d.v, x=d.x, a0=a0)
+        s = TermInput(z=self._gap + gap_shift - d.x, zdot=-d.v, x=d.x, a0=a0)
         out = np.empty((self._cen.size, library.n_terms))
         plain = []
         for j, term in enumerate(library.terms):

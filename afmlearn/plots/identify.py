@@ -12,6 +12,11 @@
     Measured against simulated deflection on the held-out span, and the phase portrait.
 `plot_force`
     Time-resolved force with its band and force against gap on approach and retraction.
+`plot_force_series`
+    Joint fit of a set-point series: force against gap per set-point and the contact
+    exponent's profile likelihood with its 95 % interval.
+`identify_figures`
+    All of the above for one identification (the figure writer of ``scripts/identify.py``).
 
 Every function takes a fitted :class:`afmlearn.identify.identifier.ForceIdentifier` (or an
 :class:`IdentifiedModel`), draws on an explicit Agg canvas (the caller's pyplot backend is never
@@ -37,7 +42,7 @@ from afmlearn.identify.selection import Candidate, pareto_front
 from afmlearn.plots.trace import _save
 
 __all__ = ["plot_pareto", "plot_coefficients", "plot_orbit", "plot_force", "objective_value",
-           "heldout_simulation"]
+           "heldout_simulation", "plot_force_series", "identify_figures", "training_figures"]
 
 FloatArray = NDArray[np.float64]
 _KNEE, _IC, _FRONT, _TRUE = "#d62728", "#1f77b4", "#ff7f0e", "#2ca02c"
@@ -373,3 +378,96 @@ def plot_force(identifier: Any, path: str | os.PathLike[str], true_force: FloatA
     ax2.set_title("Force vs gap")
     ax2.legend(fontsize="small")
     return _save(fig, _path(path))
+
+
+# ---------------------------------------------------------------------------- joint fits
+def plot_force_series(identifier: Any, path: str | os.PathLike[str]) -> Path:
+    """Force against gap of every set-point of a joint fit, and the exponent's profile.
+
+    Parameters
+    ----------
+    identifier : ForceIdentifier
+        Fitted on an experiment of several observations (``joint_``, ``force_`` (n_obs, n),
+        ``state_x_``, ``exponent_profile_``).
+    path : str or os.PathLike
+        PNG to write.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    res = identifier.joint_
+    model: IdentifiedModel = identifier.model_
+    sc = model.scales
+    f_nn, ell_nm = sc.force * 1e9, sc.length * 1e9
+    fig = _new_figure(12.0, 4.6)
+    ax1, ax2 = fig.subplots(1, 2)
+    n_obs = res.problem.n_obs
+    for i, o in enumerate(res.problem.observations):
+        z = o.gap + res.problem.offsets[i] - np.asarray(identifier.state_x_[i], float)
+        zd = -np.asarray(identifier.state_v_[i], float)
+        f = np.asarray(identifier.force_[i], float)
+        cur = force_vs_gap(z, zd, f, n_bins=120)
+        colour = (i / max(n_obs - 1, 1), 0.3, 1 - i / max(n_obs - 1, 1))
+        ax1.plot(cur["gap"] * ell_nm, cur["approach"] * f_nn, "-", color=colour, lw=1,
+                 label=f"rest gap {o.gap * ell_nm:.2f} nm")
+    ax1.axvline(model.a0 * ell_nm, color="0.3", ls=":", lw=1, label="a0")
+    ax1.axhline(0, color="0.6", lw=0.6)
+    ax1.set_xlabel("gap z [nm]")
+    ax1.set_ylabel("F_ts [nN] (> 0 repulsive), approach")
+    ax1.set_title(f"One law, {n_obs} set-points")
+    ax1.legend(fontsize="x-small")
+    prof = identifier.exponent_profile_
+    if prof is not None:
+        ex = res.exponent
+        lr = ex["n_rows"] * np.log(prof[:, 1] / np.nanmin(prof[:, 1]))
+        ax2.plot(prof[:, 0], lr, "o-", ms=3, color=_KNEE)
+        ax2.axhline(3.841, color="0.4", ls="--", lw=1, label="95 % (3.84)")
+        lo, hi = ex["interval"]
+        ax2.axvspan(lo, hi, color=_KNEE, alpha=0.15, label=f"interval {lo:.2f}-{hi:.2f}")
+        ax2.set_ylim(0, max(20.0, 3.841 * 3))
+        ax2.set_xlabel("contact exponent p")
+        ax2.set_ylabel("likelihood ratio n log(RSS / RSS_min)")
+        ax2.set_title("Exponent profile (a0, coefficients, offsets re-fitted)")
+        ax2.legend(fontsize="small")
+    else:
+        ax2.text(0.5, 0.5, "no contact term: no exponent profile", ha="center",
+                 transform=ax2.transAxes)
+    return _save(fig, _path(path))
+
+
+def identify_figures(identifier: Any, calibrated: Any, out_dir: str | os.PathLike[str]
+                     ) -> dict[str, str]:
+    """Every figure of an identification into ``out_dir``; ``{name: path}``.
+
+    The writer :func:`afmlearn.identify.infer.identify_trace` takes as ``figures`` (called
+    from ``scripts/identify.py``; the analysis never imports the plots).
+    """
+    out = Path(out_dir)
+    files = {"pareto": str(plot_pareto(identifier, out / "pareto.png")),
+             "coefficients": str(plot_coefficients(identifier.model_, None,
+                                                   out / "coefficients.png"))}
+    if getattr(identifier, "joint_", None) is not None and np.ndim(identifier.force_) == 2:
+        files["force_figure"] = str(plot_force_series(identifier, out / "force.png"))
+        return files
+    files["orbit"] = str(plot_orbit(identifier, calibrated.x, out / "orbit.png",
+                                    calibrated=calibrated))
+    files["force_figure"] = str(plot_force(identifier, out / "force.png",
+                                           calibrated=calibrated))
+    return files
+
+
+def training_figures(identifier: Any, calibrated: Any, folder: str | os.PathLike[str], *,
+                     truth_si: Mapping[str, float] | None = None,
+                     true_force: FloatArray | None = None) -> dict[str, str]:
+    """Figures of one training run (simulation with its truth), ``{name: path}``."""
+    out = Path(folder)
+    return {
+        "pareto": str(plot_pareto(identifier, out / "pareto.png")),
+        "coefficients": str(plot_coefficients(identifier.model_, truth_si,
+                                              out / "coefficients.png")),
+        "orbit": str(plot_orbit(identifier, calibrated.x, out / "orbit.png",
+                                calibrated=calibrated)),
+        "force_figure": str(plot_force(identifier, out / "force.png", true_force,
+                                       calibrated=calibrated)),
+    }

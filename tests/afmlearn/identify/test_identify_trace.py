@@ -14,6 +14,7 @@ from afmlearn.identify.identifier import LINEAR_TERMS, ForceIdentifier
 from afmlearn.identify.infer import identify_trace, jsonable
 from afmlearn.identify.model import IdentifiedModel
 from afmlearn.io import Trace, read_trace, write_trace
+from afmlearn.plots.identify import identify_figures
 from afmlearn.preprocess import calibrate
 from afmlearn.simulate import simulate
 
@@ -70,7 +71,8 @@ def run(tmp_path_factory):
     path = small_trace(tmp / "trace.h5")
     with pytest.MonkeyPatch.context() as mp:
         guard = LabelGuard(mp)
-        result = identify_trace(path, tmp / "out", identifier=fast_identifier())
+        result = identify_trace(path, tmp / "out", identifier=fast_identifier(),
+                                figures=identify_figures)
         guard_works = False
         try:
             read_trace(path, labels=True)

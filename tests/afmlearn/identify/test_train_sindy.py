@@ -19,6 +19,7 @@ from afmlearn.identify.library import (
 )
 from afmlearn.identify.model import IdentifiedModel
 from afmlearn.identify.train import match_terms, score, train, true_model
+from afmlearn.plots.identify import training_figures
 from simulator import Scales
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -37,7 +38,7 @@ def compose_train(*overrides: str):
 def trained(tmp_path_factory):
     out = tmp_path_factory.mktemp("train")
     cfg = compose_train(*TINY, f"output_dir={out}")
-    metrics, objects = train(cfg)
+    metrics, objects = train(cfg, figures=training_figures)
     return metrics, objects, out
 
 
