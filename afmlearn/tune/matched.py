@@ -127,7 +127,8 @@ def matched_config(cfg: DictConfig, calibration: dict[str, Any]) -> DictConfig:
         raise ValueError(f"excitation: the recording is {calibration['excitation']}-excited but "
                          f"the config simulates {target or 'nothing'} (pass "
                          f"excitation={calibration['excitation']})")
-    sim = OmegaConf.create(OmegaConf.to_container(cfg, resolve=True))
+    # unresolved copy: ${cantilever.*} interpolations (scales, force) follow the new values
+    sim = OmegaConf.create(OmegaConf.to_container(cfg, resolve=False))
     with open_dict(sim):
         for key in ("matched", "identifier", "hparams_search", "recording", "fold", "row",
                     "hydra"):
@@ -148,6 +149,7 @@ def matched_config(cfg: DictConfig, calibration: dict[str, Any]) -> DictConfig:
         sim.free_trace = True
         sim.shard = {"index": 0, "count": n_exp, "overwrite": False}
         sim.dataset = {"ranges": OmegaConf.to_container(m.ranges, resolve=True)}
+        OmegaConf.resolve(sim)
         digest = hashlib.sha1(json.dumps(OmegaConf.to_container(sim), sort_keys=True,
                                          default=str).encode()).hexdigest()[:12]
         sim.output = str(Path(str(m.cache_dir)) / digest)

@@ -80,8 +80,12 @@ def summary(study: optuna.Study) -> dict[str, Any]:
     if complete and len(study.directions) == 1:
         b = study.best_trial
         best = {"number": b.number, "value": b.value, "params": dict(b.params)}
+    base = next((t for t in trials if t.user_attrs.get("baseline")), None)
+    baseline = None if base is None else {"number": base.number, "state": base.state.name.lower(),
+                                          "value": base.value, "params": dict(base.params)}
     return {
         "study_name": study.study_name,
+        "baseline": baseline,
         "directions": [d.name.lower() for d in study.directions],
         "counts": counts,
         "best": best,
@@ -101,6 +105,10 @@ def summary_table(study: optuna.Study, *, top: int = 10) -> str:
              f"{c['complete']} complete, {c['pruned']} pruned, {c['fail']} failed, "
              f"{c['running']} running, {c['waiting']} waiting; "
              f"wall time per trial {doc['wall_time_per_trial_s']:.3g} s"]
+    base = doc["baseline"]
+    if base is not None and base["value"] is not None:
+        lines.append(f"baseline (the config's own values): trial {base['number']}, "
+                     f"value {base['value']:.6g}")
     complete = [t for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))]
     if not complete or len(study.directions) != 1:
         return "\n".join(lines)

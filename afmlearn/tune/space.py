@@ -168,6 +168,22 @@ class SearchSpace:
             out[key] = dist.choices[0] if isinstance(dist, CategoricalDistribution) else dist.low
         return out
 
+    def contains(self, key: str, value: Any) -> bool:
+        """Whether ``value`` is a point of parameter ``key``'s distribution."""
+        d = self.distributions[key]
+        if isinstance(d, CategoricalDistribution):
+            return any(value == c and type(value) is type(c) for c in d.choices)
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            return False
+        if isinstance(d, IntDistribution) and value != int(value):
+            return False
+        if not d.low <= value <= d.high:
+            return False
+        if d.step is None:
+            return True
+        k = (value - d.low) / d.step
+        return abs(k - round(k)) < 1e-9
+
     def suggest(self, trial: Any) -> dict[str, Any]:
         """Draw every parameter of ``trial`` (an :class:`optuna.Trial`) from its distribution."""
         out: dict[str, Any] = {}

@@ -62,7 +62,7 @@ class OptunaSweeperImpl:
                  n_jobs: int = 1, max_failures: Any = None, heartbeat_interval: int = 60,
                  grace_period: Any = None, max_retry: int = 3, folds: Any = None,
                  results_dir: str = "outputs/tuned", figures: bool = True,
-                 params: Any = None) -> None:
+                 baseline: bool = False, params: Any = None) -> None:
         self.sampler = sampler
         self.pruner = pruner
         self.direction = direction
@@ -77,6 +77,7 @@ class OptunaSweeperImpl:
         self.folds = folds
         self.results_dir = results_dir
         self.figures = figures
+        self.baseline = baseline
         self.params = params
 
     # ------------------------------------------------------------------ hydra interface
@@ -104,6 +105,8 @@ class OptunaSweeperImpl:
         index = int(os.environ.get(WORKER_ENV, "0"))
         log.info("study %s on %s: %d trials, worker %d", name, url.split("@")[-1],
                  self.n_trials, index)
+        if index == 0 and self.baseline and not study.trials:
+            self._enqueue_baseline(study, space)
         children = self._spawn_workers() if index == 0 else []
         seed = sampler_cfg.get("seed")
         factory = None if seed is None else (
@@ -160,6 +163,23 @@ class OptunaSweeperImpl:
         return space, folds
 
     @staticmethod
+    def _enqueue_baseline(self, study: optuna.Study, space: SearchSpace) -> None:
+        """Queue the config's own values as the first trial (the "before" of the study)."""
+        cfg = self.hydra_context.config_loader.load_sweep_config(self.config, list(space.fixed))
+        params = {}
+        for key in space.distributions:
+            path = key.lstrip("+~")
+            value = (OmegaConf.select(cfg, f"hydra.runtime.choices.{path}")
+                     if self.hydra_context.config_loader.get_group_options(path.replace(".", "/"))
+                     else OmegaConf.select(cfg, path))
+            if not space.contains(key, value):
+                log.warning("baseline: %s = %r is outside the search space; not enqueued",
+                            key, value)
+                return
+            params[key] = value
+        study.enqueue_trial(params, user_attrs={"baseline": True})
+        log.info("baseline trial queued: %s", params)
+
     def _single_overrides(space: SearchSpace, folds: tuple[str, list[Any]] | None
                           ) -> list[tuple[str, str]]:
         out = [(k, f"{k}={format_value(v)}") for k, v in space.example().items()]

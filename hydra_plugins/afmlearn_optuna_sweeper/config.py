@@ -49,6 +49,9 @@ class OptunaSweeperConf:
         Where best.yaml, summary.json, figures/ and experiment/<study_name>.yaml go.
     figures : bool
         Draw history, importances and parallel coordinates at the end.
+    baseline : bool
+        When the study is new, queue the config's own values of the searched parameters as
+        its first trial (the "before" of the study, measured under the same conditions).
     params : dict or None
         Config path -> sweep (``interval(a, b)``, ``tag(log, interval(a, b))``,
         ``range(a, b[, s])``, ``choice(...)``) or fixed value.
@@ -69,6 +72,7 @@ class OptunaSweeperConf:
     folds: Any = None
     results_dir: str = "outputs/tuned"
     figures: bool = True
+    baseline: bool = False
     params: Any = None
 
 

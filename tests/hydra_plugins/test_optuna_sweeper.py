@@ -71,11 +71,15 @@ def test_two_workers_share_sqlite(tmp_path: Path, run_toy) -> None:
     url = f"sqlite:///{tmp_path / 'toy.db'}"
     marks = tmp_path / "marks"
     done = run_toy(f"hydra.sweeper.storage={url}", "hydra.sweeper.n_trials=6",
-                   "hydra.sweeper.n_jobs=2", "sleep_s=0.5", f"marker_dir={marks}", *FAST)
+                   "hydra.sweeper.n_jobs=2", "hydra.sweeper.baseline=true", "sleep_s=0.5",
+                   f"marker_dir={marks}", *FAST)
     assert done.returncode == 0, done.stderr[-2000:]
     study = _study(url)
     assert len(study.get_trials(states=FINISHED)) == 6
     assert len(set(_finished_params(study))) == 6
+    first = study.trials[0]  # the config's own values, queued as the baseline
+    assert first.user_attrs.get("baseline") and first.params == {"x": 0.0, "n": 1, "opt": "a"}
+    assert first.value == 2.0  # (0 - 1)^2 + 1
     pids = {p.stem.split("-")[0] for p in marks.glob("*.done")}
     assert len(pids) == 2  # both processes ran trials
     best = study.best_trial

@@ -65,6 +65,8 @@ def test_matched_config_copies_the_recording(recording: Path, tmp_path: Path) ->
     cal = matched.recording_calibration(recording)
     sim = matched.matched_config(cfg, cal)
     assert sim.cantilever.spring_constant_n_per_m == 40.0
+    assert sim.scales.spring_constant == 40.0  # interpolations follow (units of the truth)
+    assert sim.scales.resonance_frequency == 3.0e5
     assert sim.cantilever.quality_factor == 300.0
     assert sim.scenario.samples_per_period == 100 and sim.scenario.n_periods == 40
     assert sim.excitation.free_amplitude_ratio == pytest.approx(1.2)

@@ -119,3 +119,13 @@ def test_search_space_rejects(params: dict, needle: str) -> None:
     with pytest.raises(ValueError) as err:
         SearchSpace.parse(params)
     assert needle in str(err.value)
+
+
+def test_contains() -> None:
+    space = SearchSpace.parse({"a": "range(40, 161, 20)", "b": "interval(0.1, 0.4)",
+                               "c": "choice(true, false)", "d": "choice(16, 32)"})
+    assert space.contains("a", 100) and not space.contains("a", 110)
+    assert not space.contains("a", 180) and not space.contains("a", 100.5)
+    assert space.contains("b", 0.3) and not space.contains("b", 0.5)
+    assert space.contains("c", True) and not space.contains("c", 1)
+    assert space.contains("d", 32) and not space.contains("d", 64)
