@@ -48,6 +48,10 @@ class CurveDiagnoser:
         The recording lock-in's filter.
     max_nfev : int
         Least-squares evaluations per extension fit.
+    step : float
+        Time step of the slow flow (dimensionless, see :class:`CurveFitter`).
+    n_starts : int
+        Starts of the baseline fit (see :class:`CurveFitter`).
 
     Attributes
     ----------
@@ -63,7 +67,8 @@ class CurveDiagnoser:
 
     def __init__(self, *, hypotheses: tuple[Hypothesis, ...] = EXTENSIONS,
                  threshold: float = 10.0, a0_m: float = 0.3e-9, tip_radius_m: float = 10e-9,
-                 lockin: LockIn | None = None, max_nfev: int = 12) -> None:
+                 lockin: LockIn | None = None, max_nfev: int = 12,
+                 step: float = 4.0 * math.pi, n_starts: int = 1) -> None:
         if not all(isinstance(h, Hypothesis) for h in hypotheses):
             raise ValueError("hypotheses must be Hypothesis objects")
         if not (math.isfinite(threshold) and threshold >= 0.0):
@@ -74,14 +79,17 @@ class CurveDiagnoser:
         self.tip_radius_m = tip_radius_m
         self.lockin = lockin
         self.max_nfev = int(max_nfev)
+        self.step = float(step)
+        self.n_starts = int(n_starts)
 
     def fit(self, curve: Curve) -> CurveDiagnoser:
         """Fit on the approach (``segment == 0``), measure on the retraction."""
-        opts = {"a0_m": self.a0_m, "tip_radius_m": self.tip_radius_m, "lockin": self.lockin}
+        opts = {"a0_m": self.a0_m, "tip_radius_m": self.tip_radius_m, "lockin": self.lockin,
+                "step": self.step}
         fit_mask = curve.segment == 0
         held = curve.segment == 1
         self.curve_ = curve
-        self.baseline_ = CurveFitter(**opts).fit(curve, mask=fit_mask)
+        self.baseline_ = CurveFitter(n_starts=self.n_starts, **opts).fit(curve, mask=fit_mask)
         b_chi2 = self.baseline_.chi2_
         n = self.baseline_.n_fit_
         b_held = heldout_nrmse(self.baseline_, curve, held)

@@ -49,7 +49,9 @@ EXTENSIONS: tuple[Hypothesis, ...] = (
     Hypothesis("contact_geometry", (Parameter("exponent", 1.8, 1.0, 3.5, log=False),)),
     Hypothesis("viscoelastic", (Parameter("visco", 0.05, 1e-5, 1e3),)),
     Hypothesis("long_range_damping", (Parameter("damping", 1e-3, 1e-7, 1e1),
-                                      Parameter("decay_length", 0.1, 1e-3, 2.0))),
+                                      # up to 100 free amplitudes: squeeze-film damping
+                                      # reaches microns
+                                      Parameter("decay_length", 0.1, 1e-3, 100.0))),
     Hypothesis("electrostatic", (Parameter("electrostatic", 1e-4, 1e-9, 1e0),)),
     Hypothesis("adhesion_hysteresis", (Parameter("neck", 0.01, 1e-5, 0.5),)),
     Hypothesis(DRIFT, (Parameter(DRIFT, 0.0, -1e-4, 1e-4, log=False),)),
