@@ -81,25 +81,33 @@ def _a0_from_model(model: dict[str, Any], length_m: float | None) -> float | Non
 
 def _row_from_trace(trace: Trace, row: int | None) -> _Row:
     i = None
-    if trace.is_sweep:
+    z_rows = None
+    if trace.has_rows:               # a frequency sweep or a set-point series: one row
         i = trace.n_points // 2 if row is None else int(row)
         if not 0 <= i < trace.n_points:
             raise ValueError(f"row must be in [0, {trace.n_points}), got {row}")
-    x = trace.deflection_m if i is None else trace.deflection_m[i]
-    drive = float(trace.drive_frequency_hz if i is None else trace.drive_frequency_hz[i])
+        if trace.labels is not None:
+            z_rows = trace.labels.extra.get("tip_sample_gap_m")
+        trace = trace.row(i)
+    if trace.deflection_m is None:
+        raise ValueError("trace: no deflection_m to plot (a lock-in amplitude/phase curve)")
+    x = trace.deflection_m
+    drive = float(trace.drive_frequency_hz)
     lab = trace.labels
     true = force = tip_gap = a0 = None
     if lab is not None:
-        force = lab.force_n if i is None else lab.force_n[i]
+        force = lab.force_n
         if lab.modal_m is not None:
-            true = (lab.modal_m if i is None else lab.modal_m[:, i]).sum(axis=0)
-        z = lab.extra.get("tip_sample_gap_m")
+            true = lab.modal_m.sum(axis=0)
+        z = lab.extra.get("tip_sample_gap_m") if z_rows is None else z_rows[i]
         if z is not None and z.shape == x.shape:
             tip_gap = z
         elif true is not None and trace.excitation != "base":
             tip_gap = trace.gap_m - true
         a0 = _a0_from_model(lab.model, lab.model.get("calibration", {}).get("length_m"))
     title = f"drive {drive / 1e3:.3f} kHz" + ("" if i is None else f" (row {i})")
+    if i is not None and np.ndim(trace.gap_m) == 0:
+        title += f", rest gap {float(trace.gap_m) * 1e9:.2f} nm"
     return _Row(deflection_m=x, sample_rate_hz=trace.sample_rate_hz, drive_frequency_hz=drive,
                 true_deflection_m=true, force_n=force, tip_gap_m=tip_gap,
                 rest_gap_m=trace.gap_m, free_deflection_m=trace.free_deflection_m,
@@ -112,18 +120,22 @@ def _row_from_result(result: Any, scales: Any, row: int | None) -> _Row:
         raise ValueError("scales is required to plot a SimulationResult in SI units")
     si = result.to_si(scales)
     ell = scales.length
-    sweep = result.is_sweep
-    i = (result.q.shape[0] // 2 if row is None else int(row)) if sweep else None
+    rows = result.has_rows           # a frequency sweep or a set-point series
+    i = (result.q.shape[0] // 2 if row is None else int(row)) if rows else None
     pick = (lambda a: a) if i is None else (lambda a: a[i])
     x = pick(si["deflection_m"])
-    drive = float(pick(si["drive_frequency_hz"]))
+    drives = np.atleast_1d(si["drive_frequency_hz"])
+    drive = float(drives[i] if i is not None and drives.size > 1 else drives[0])
+    rest_gap = si["gap_m"]
+    if i is not None and np.shape(rest_gap) == (result.q.shape[0],):   # series: gap per row
+        rest_gap = float(rest_gap[i])
     cl = result.system.cantilever
     higher = (scales.resonance_frequency * np.asarray(cl.frequency_ratios[1:])
               if cl.n_modes > 1 else None)
     a0 = result.system.force.a0 * ell or None
     return _Row(deflection_m=x, sample_rate_hz=float(si["sample_rate_hz"]),
                 drive_frequency_hz=drive, true_deflection_m=x, force_n=pick(si["force_n"]),
-                tip_gap_m=pick(result.gap) * ell, rest_gap_m=si["gap_m"],
+                tip_gap_m=pick(result.gap) * ell, rest_gap_m=rest_gap,
                 higher_mode_frequencies_hz=higher, a0_m=a0,
                 title=f"{result.scenario}: drive {drive / 1e3:.3f} kHz")
 

@@ -145,7 +145,7 @@ def _at(theta_grid, values, theta):
 def test_force_gap_panel_against_truth(null_diagnosis, tmp_path):
     """Where the panel draws the force implied by the measured orbit it agrees with the true
     force to its stated tolerance (the old inversion swung by nN where the truth is ~0); the
-    model's force law follows the truth."""
+    baseline's force law follows the truth (a null trace)."""
     import numpy as np
 
     from afmlearn.plots.diagnose import force_gap_panel_data, plot_force_gap
@@ -160,8 +160,9 @@ def test_force_gap_panel_against_truth(null_diagnosis, tmp_path):
     err = np.abs(_at(d["theta"], d["inverted_all"], theta) - f_true)[det]
     assert np.quantile(err, 0.95) <= d["tolerance"] and err.max() <= 2 * d["tolerance"]
     assert np.all(np.isnan(d["inverted"][~d["determined"]]))
+    # the baseline's z^-2 tail is not the simulator's sphere van der Waals law, hence 20 %
     model = _at(d["theta"], d["model"], theta)
-    assert np.sqrt(np.mean((model - f_true) ** 2)) < 0.1 * np.ptp(f_true)
+    assert np.sqrt(np.mean((model - f_true) ** 2)) < 0.2 * np.ptp(f_true)
     assert plot_force_gap(dg, tmp_path / "f.png").read_bytes().startswith(PNG)
 
 
@@ -193,3 +194,23 @@ def test_spectrum_and_setpoint_panels_against_truth(null_diagnosis, tmp_path):
         .complex_amplitudes[1]), abs=5 * s["amplitude"]["sigma"][0])
     figs = plot_all(dg, tmp_path)
     assert_pngs(list(figs.values()), [p.name for p in figs.values()])
+
+
+def test_plot_trace_of_a_series_row(tmp_path):
+    """A set-point series plots per row: the row's own rest gap and tip-sample gap."""
+    import numpy as np
+
+    from afmlearn.diagnose.synthetic import draw_series_case, simulate_series
+    from afmlearn.plots.trace import _row_from_trace
+
+    case = draw_series_case(np.random.default_rng(4), causes="none", n_points=3)
+    path = simulate_series(case, tmp_path / "s.h5", samples_per_period=60, n_periods=6,
+                           free_periods=3)
+    tr = read_trace(path, labels=True)
+    r = _row_from_trace(tr, 2)
+    assert float(r.rest_gap_m) == pytest.approx(tr.gap_m[2])
+    np.testing.assert_allclose(r.tip_gap_m, tr.labels.extra["tip_sample_gap_m"][2])
+    paths = plot_trace(tr, tmp_path, row=2, prefix="row")
+    assert len(paths) == 4
+    with pytest.raises(ValueError, match="row"):
+        plot_trace(tr, tmp_path, row=3)
