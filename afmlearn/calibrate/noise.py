@@ -35,11 +35,25 @@ class NoiseModel(ABC):
         return float(np.sum(self._terms(observed, expected, n_averages)[0]))
 
     def covariance(self, jacobian: FloatArray, observed: FloatArray, expected: FloatArray,
-                   n_averages: float) -> FloatArray:
-        """Parameter covariance (inverse Fisher information), shape (p, p), for the
-        Jacobian ``dE/dtheta`` of shape (n_bins, p), bins taken as independent."""
+                   n_averages: float, *, correlation: tuple[float, ...] = (1.0,)) -> FloatArray:
+        """Parameter covariance, shape (p, p), for the Jacobian ``dE/dtheta`` of shape
+        (n_bins, p).
+
+        Sandwich form ``I^-1 M I^-1`` with the Fisher information ``I = G^T G``
+        (``G_k = sqrt(w_k) dE_k/dtheta``) and ``M = sum_kl rho_|k-l| G_k G_l^T`` for bins whose
+        noise is correlated with coefficients ``correlation = (1, rho_1, rho_2, ...)``
+        (`windows.bin_correlation`); with independent bins ``M = I`` and this is ``I^-1``.
+        """
         weights = self._terms(observed, expected, n_averages)[1]
-        return np.linalg.inv(jacobian.T @ (weights[:, None] * jacobian))
+        g = np.sqrt(weights)[:, None] * jacobian
+        info = g.T @ g
+        meat = info.copy()
+        for lag, rho in enumerate(correlation[1:], start=1):
+            if lag < g.shape[0] and rho != 0:
+                cross = g[:-lag].T @ g[lag:]
+                meat += rho * (cross + cross.T)
+        inv = np.linalg.inv(info)
+        return inv @ meat @ inv
 
 
 @final

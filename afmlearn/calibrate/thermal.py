@@ -7,11 +7,12 @@ level is written through the spring constant, ``P_dc = C k_B T / k * 2 / (pi f0 
 (`sho.dc_level`), so the fitted parameters are ``(f0, Q, k, B)`` directly. The objective is a
 `noise.NoiseModel` (default: the Gamma likelihood of an averaged spectrum).
 
-Confidence intervals: inverse expected Fisher information at the optimum, in log parameters
-(so Q, k, B stay positive), scaled by ``1 + 2 sum rho_l`` for the correlation of
-neighbouring bins of a tapered window (`windows.variance_inflation`; 1 for a rectangular
-window) and by the measured reduced deviance when it exceeds 1 (a model that does not fit the
-noise widens its intervals instead of hiding it).
+Confidence intervals: the sandwich covariance ``I^-1 M I^-1`` in log parameters (so Q, k, B
+stay positive): ``I`` the expected Fisher information at the optimum, ``M`` the same with the
+correlation of neighbouring bins of a tapered window (`windows.bin_correlation`; none for a
+rectangular window; `noise.NoiseModel.covariance`), scaled by the measured reduced deviance
+when it exceeds 1 (a model that does not fit the noise widens its intervals instead of
+hiding it). Coverage measured on 40 synthetic Welch spectra (slow test).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from afmlearn.calibrate.noise import GammaLikelihood, NoiseModel
 from afmlearn.calibrate.response import BinResponse, PointSample, WindowResponse
 from afmlearn.calibrate.sho import BOLTZMANN_J_PER_K, dc_level, mean_square, sho_psd
 from afmlearn.calibrate.spectrum import PowerSpectrum
-from afmlearn.calibrate.windows import variance_inflation
+from afmlearn.calibrate.windows import bin_correlation
 
 __all__ = ["PARAMETERS", "ThermalFit"]
 
@@ -78,8 +79,9 @@ class ThermalFit:
     residual_correlation_ : float
         Lag-1 correlation of the normalised residuals ``P/E - 1`` (0 for independent bins;
         4/9 for a Hann window).
-    variance_inflation_ : float
-        Factor applied to the covariance for correlated bins.
+    bin_correlation_ : tuple of float
+        Power correlation of bins 0, 1, 2 ... apart assumed by the intervals (the window's;
+        ``(1,)`` without a window response).
     frequency_hz_, observed_m2_per_hz_, expected_m2_per_hz_ : ndarray, shape (n_fit,)
         Bins fitted, their values and the fitted model's expectation.
     fit_range_hz_ : (float, float)
@@ -153,11 +155,11 @@ class ThermalFit:
         u = _optimise(objective, u, steps=steps, polish=not isinstance(response, PointSample))
         e = expected(u)
         jac = _jacobian(expected, u, e)
-        inflation = variance_inflation(response.window, response.segment_length) \
-            if isinstance(response, WindowResponse) else 1.0
+        correlation = bin_correlation(response.window, response.segment_length) \
+            if isinstance(response, WindowResponse) else (1.0,)
         dof = max(p.size - 4, 1)
         deviance = 2.0 * n_avg * float(np.sum(p / e - 1.0 - np.log(p / e))) / dof
-        cov = noise.covariance(jac, p, e, n_avg) * inflation
+        cov = noise.covariance(jac, p, e, n_avg, correlation=correlation)
         if isinstance(noise, GammaLikelihood):
             cov = cov * max(deviance, 1.0)
         z = float(norm.ppf(0.5 + self.confidence / 2.0))
@@ -176,7 +178,7 @@ class ThermalFit:
         self.reduced_deviance_ = deviance
         r = p / e - 1.0
         self.residual_correlation_ = float(np.corrcoef(r[:-1], r[1:])[0, 1])
-        self.variance_inflation_ = inflation
+        self.bin_correlation_ = correlation
         self.frequency_hz_, self.observed_m2_per_hz_, self.expected_m2_per_hz_ = f, p, e
         self.fit_range_hz_ = (float(f[0]), float(f[-1]))
         self.correction_, self.response_, self.noise_ = correction, response, noise
@@ -210,7 +212,7 @@ class ThermalFit:
             n_averages=self.n_averages_, fit_range_hz=list(self.fit_range_hz_),
             n_bins=int(self.frequency_hz_.size), reduced_deviance=self.reduced_deviance_,
             residual_lag1_correlation=self.residual_correlation_,
-            variance_inflation=self.variance_inflation_)
+            bin_correlation=list(self.bin_correlation_))
         return out
 
     # ------------------------------------------------------------------ helpers

@@ -8,7 +8,6 @@ and neighbouring bins of a tapered window are correlated. Both follow from the w
 
 from __future__ import annotations
 
-import math
 from abc import ABC, abstractmethod
 from functools import lru_cache
 from typing import final
@@ -116,14 +115,6 @@ def bin_correlation(window: Window, n_segment: int, max_lag: int = 4) -> tuple[f
     rho = [abs(np.sum(w2 * np.exp(2j * np.pi * lag * t / n))) ** 2 / float(w2.sum()) ** 2
            for lag in range(max_lag + 1)]
     return tuple(float(r) for r in rho)
-
-
-def variance_inflation(window: Window, n_segment: int) -> float:
-    """``1 + 2 sum_l rho_l``: how much correlated bins inflate the variance of a fitted
-    parameter whose score varies slowly across bins (1 for a rectangular window, ~1.94 for
-    Hann)."""
-    rho = bin_correlation(window, _length(n_segment))
-    return 1.0 + 2.0 * math.fsum(rho[1:])
 
 
 def _length(n: int) -> int:
