@@ -4,11 +4,11 @@ Examples
 --------
     python scripts/convert.py input=AZ_0052.ibw output=outputs/AZ_0052.h5
     python scripts/convert.py input=run.csv output=run.h5 calibration=outputs/cal/calibration.json
-    python scripts/convert.py input=JAM.h5 output=jam_trace.h5 +read.column=s +read.unit=nm \
-        +set.sample_rate_hz=1.15e6 +set.spring_constant_n_per_m=3 ...
+    python scripts/convert.py input=JAM.h5 output=jam_trace.h5 column=s unit=nm \
+        sample_rate_hz=1.15e6 spring_constant_n_per_m=3 ...
 
 Calibration: the file's header, replaced by calibration.json (scripts/calibrate.py), replaced
-by `set.<field>=value` overrides (trace-format names, SI units). Unknown format, missing
+by `<field>=value` overrides (trace-format names, SI units). Unknown format, missing
 calibration, a truncated or corrupted file, wrong units: prints `error: ...` (one line) and
 exits with status 2.
 """
@@ -20,16 +20,18 @@ import sys
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
-from afmlearn.io.instruments import convert_recording
+from afmlearn.io.instruments import CALIBRATION_FIELDS, READ_OPTIONS, convert_recording
 
 
 @hydra.main(config_path="../conf", config_name="convert", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.io.instruments.convert_recording` and list the files written."""
     try:
-        overrides = {**OmegaConf.to_container(cfg.set), **OmegaConf.to_container(cfg.read)}
+        given = OmegaConf.to_container(cfg)
+        overrides = {k: given[k] for k in (*CALIBRATION_FIELDS, *READ_OPTIONS)
+                     if given.get(k) is not None}
         written = convert_recording(cfg.input, cfg.output, calibration=cfg.calibration,
-                                    **{k: v for k, v in overrides.items() if v is not None})
+                                    **overrides)
     except (ValueError, OSError) as err:  # RecordingError, TraceFormatError: ValueErrors
         print(f"error: {err}", file=sys.stderr)
         sys.exit(2)

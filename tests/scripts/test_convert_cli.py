@@ -35,7 +35,7 @@ def run(monkeypatch, capsys, *args: str) -> tuple[int, str, str]:
 
 def test_convert_ibw_to_trace_and_static_curve(tmp_path, monkeypatch, capsys):
     code, out, err = run(monkeypatch, capsys, f"input={IBW}", f"output={tmp_path / 'a.h5'}",
-                         "set.quality_factor=200")
+                         "quality_factor=200")
     assert code == 0, err
     trace = read_trace(tmp_path / "a.h5")
     assert trace.quality_factor == 200.0 and trace.is_curves

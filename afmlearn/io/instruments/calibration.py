@@ -74,4 +74,4 @@ def require(values: Mapping[str, Any], names: tuple[str, ...], path: Path | str)
         if values.get(name) is None:
             raise RecordingError(
                 f"{path}: missing calibration '{name}' (not in the file): pass {name}=VALUE "
-                f"(convert.py: set.{name}=VALUE) or calibration=calibration.json holding it")
+                "or calibration=calibration.json holding it")

@@ -116,7 +116,7 @@ def test_plain_hdf5_deflection_series_with_user_calibration():
     assert peak == pytest.approx(60.63e3, rel=1e-3)  # the package's notebook: ~60.63 kHz
     missing = dict(calibration)
     missing.pop("quality_factor")
-    with pytest.raises(RecordingError, match="'quality_factor'.*set.quality_factor"):
+    with pytest.raises(RecordingError, match="'quality_factor'.*quality_factor=VALUE"):
         open_recording(JAM, column="s", unit="nm", **missing)
 
 
