@@ -35,8 +35,17 @@ class AfmformatsReader(InstrumentReader):
     def _parse(self, path: Path, options: Mapping[str, Any]) -> list[Parsed]:
         import afmformats
 
+        try:
+            curves = afmformats.load_data(str(path))
+        except afmformats.errors.FileFormatNotSupportedError:
+            if path.suffix.lower() in (".csv", ".txt"):
+                raise RecordingError(
+                    f"{path}: neither a table of the column convention (a header of "
+                    "<quantity>_<unit> names, docs/recordings.md) nor a force-curve file "
+                    "afmformats knows") from None
+            raise
         out = []
-        for data in afmformats.load_data(str(path)):
+        for data in curves:
             columns = list(data.columns)
             if "force" not in columns:
                 raise RecordingError(f"{path}: no force column (columns {columns})")

@@ -193,3 +193,14 @@ def test_read_trace_and_experiment_accept_instrument_files(tmp_path):
     for name in ("amplitude_m", "phase_rad", "z_piezo_m", "segment", "gap_m"):
         np.testing.assert_array_equal(getattr(back, name), getattr(t, name))
     assert back.lockin_bandwidth_hz == t.lockin_bandwidth_hz == 1000.0
+
+
+NCAFM = SHARED / "ncafm_fm_spectroscopy" / "all_data_dataframe_237K.csv"
+
+
+@pytest.mark.skipif(not NCAFM.is_file(), reason=f"GPL data not present: {NCAFM}")
+def test_fm_spectroscopy_table_is_refused_with_one_clear_line():
+    """Δf(z) tables (FM-AFM) are no trace-format kind: one line saying what a CSV must be."""
+    with pytest.raises(RecordingError, match="neither a table of the column convention") as err:
+        open_recording(NCAFM)
+    assert "\n" not in str(err.value)
