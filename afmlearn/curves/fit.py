@@ -186,7 +186,16 @@ class CurveFitter:
         if self.start is not None:
             x = [self.start.get(OFFSET, guess), self.start.get(OMEGA, self.model_.omega)]
             x += [_enc(p, self.start.get(p.field, p.init)) for p in params]
-            return [np.array(x)]
+            cands = [np.array(x)]
+            for i, p in enumerate(params):
+                for alt in p.alternatives:
+                    y = np.array(x)
+                    y[2 + i] = _enc(p, alt)
+                    cands.append(y)
+            if len(cands) == 1:
+                return cands
+            costs = [float(r @ r) for r in map(self._residual, cands)]
+            return [cands[int(np.argmin(costs))]]
         scan = []
         tail = [_enc(p, p.init) for p in params[2:]]
         offsets = (guess - 0.05, guess, guess + 0.05) if self.n_starts == 1 else \

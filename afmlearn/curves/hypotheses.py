@@ -22,7 +22,8 @@ DRIFT = "drift"
 class Parameter:
     """One fitted parameter: a :class:`CurveLaw` field (or ``drift``), start and bounds.
 
-    ``log`` parameters are fitted as ``log10`` of the value (bounds are values, > 0).
+    ``log`` parameters are fitted as ``log10`` of the value (bounds are values, > 0);
+    ``alternatives`` are further starting values tried (the best start by cost is kept).
     """
 
     field: str
@@ -30,6 +31,7 @@ class Parameter:
     low: float
     high: float
     log: bool = True
+    alternatives: tuple[float, ...] = ()
 
 
 @final
@@ -51,7 +53,8 @@ EXTENSIONS: tuple[Hypothesis, ...] = (
     Hypothesis("long_range_damping", (Parameter("damping", 1e-3, 1e-7, 1e1),
                                       # up to 100 free amplitudes: squeeze-film damping
                                       # reaches microns
-                                      Parameter("decay_length", 0.1, 1e-3, 100.0))),
+                                      Parameter("decay_length", 0.1, 1e-3, 100.0,
+                                                alternatives=(1.0, 10.0)))),
     Hypothesis("electrostatic", (Parameter("electrostatic", 1e-4, 1e-9, 1e0),)),
     Hypothesis("adhesion_hysteresis", (Parameter("neck", 0.01, 1e-5, 0.5),)),
     Hypothesis(DRIFT, (Parameter(DRIFT, 0.0, -1e-4, 1e-4, log=False),)),
