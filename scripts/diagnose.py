@@ -1,14 +1,18 @@
-"""Diagnose a recorded trace: what the baseline gets wrong, the cause, the gain (Hydra entry).
+"""Diagnose a recording: what the baseline gets wrong, the causes, the gain (Hydra entry).
 
 Examples
 --------
     python scripts/diagnose.py trace=outputs/demo/measured.h5 out_dir=outputs/diagnose
+    python scripts/diagnose.py trace=series.h5 out_dir=out diagnoser.max_folds=8
     python scripts/diagnose.py trace=sweep.h5 row=40 out_dir=out diagnoser.progress=true
 
-Writes <out_dir>/report.json (design.md section 3), report.md and figures (see
-afmlearn.diagnose.report.diagnose_trace); the file's /labels group is never read. Bad input
-(missing calibration, fewer than 20 samples per drive period, clipped signal, NaN, a varying
-gap, not a trace file, a sweep without `row`) prints `error: ...` and exits with status 2.
+A set-point series is diagnosed as one experiment (every row, one force law; held-out =
+whole set-points), a ramp through quasi-steady windows, one steady record with its last
+periods held out. Writes <out_dir>/report.json (design.md section 3), report.md and the
+figures (afmlearn.plots.diagnose.plot_all, drawn here: the analysis never imports the
+plots); the file's /labels group is never read. Bad input (missing calibration, fewer than 20
+samples per drive period, clipped signal, NaN, not a trace file, a sweep without `row`)
+prints `error: ...` and exits with status 2.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 
 from afmlearn.diagnose.report import diagnose_trace
+from afmlearn.plots.diagnose import plot_all
 
 
 @hydra.main(config_path="../conf", config_name="diagnose", version_base="1.3")
@@ -28,15 +33,23 @@ def main(cfg: DictConfig) -> None:
     try:
         diagnoser = instantiate(cfg.diagnoser)
         rep = diagnose_trace(cfg.trace, cfg.out_dir, row=cfg.row, diagnoser=diagnoser,
-                             figures=bool(cfg.figures))
+                             figures=plot_all if cfg.figures else None)
     except ValueError as err:  # InputError, TraceFormatError and bad settings are ValueErrors
         print(f"error: {err}", file=sys.stderr)
         sys.exit(2)
     print(f"cause        {rep['cause']}  (confidence {rep['confidence']:.2f})")
+    if len(rep["causes"]) > 1:
+        print("causes       " + ", then ".join(f"{c['cause']} (gain {c['gain']:+.3f})"
+                                              for c in rep["causes"]))
     print(f"gain         {rep['gain']:.3f}  (held-out NRMSE {rep['baseline']['heldout_nrmse']:.4g}"
           f" -> {rep['extended']['heldout_nrmse']:.4g})")
     print(f"baseline     {rep['baseline']['equation']}")
     print(f"extended     {rep['extended']['equation']}")
+    if rep["contact_exponent"]:
+        ce = rep["contact_exponent"]
+        lo, hi = ce["interval_95"]
+        print(f"exponent     {ce['exponent']:.2f} (95 % interval {lo:.2f}-{hi:.2f}"
+              f"{'' if ce['bounded'] else '; the data do not bound it'})")
     for warning in rep["warnings"]:
         print(f"warning: {warning}")
     print(f"report       {cfg.out_dir}/report.md")

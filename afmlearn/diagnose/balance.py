@@ -155,8 +155,10 @@ class PeriodicOrbit:
 class Solution:
     """A fitted candidate: ``coef = [K, D, B, c_1..c_m]``, whitened residual, chi2.
 
-    ``values`` are the nonlinear parameters that built ``spec`` (``a0``, ``phi`` and the
-    extension's, in the order of its parameters), when known.
+    ``values`` are the nonlinear parameters that built ``spec`` (``a0`` and the extension's,
+    in the order of its parameters), when known. ``phases`` are the drive phases of the
+    observations of a joint fit (``spec.drive_phase`` is then a placeholder; the model at
+    observation ``i`` has drive phase ``phases[i]``).
     """
 
     spec: ModelSpec
@@ -164,6 +166,7 @@ class Solution:
     residual: FloatArray
     chi2: float
     values: tuple[float, ...] = ()
+    phases: tuple[float, ...] = ()
 
 
 @final
@@ -236,6 +239,7 @@ class HarmonicBalance:
         J += proj @ (fx[:, None] * basis + fv[:, None] * dbasis)
         inv = np.linalg.pinv(J, rcond=1e-10)
         self._W = inv / o.sigma_rows[:, None]
+        self._cache: dict[ModelSpec, tuple[FloatArray, ...]] = {}
 
     def _force_gradients(self, sol: Solution) -> tuple[FloatArray, FloatArray]:
         """``dF/dx`` and ``dF/dx'`` along the orbit for the reference solution's force."""
@@ -252,8 +256,36 @@ class HarmonicBalance:
         return -fz, -fzd
 
     # ------------------------------------------------------------------ rows
-    def design(self, spec: ModelSpec) -> tuple[FloatArray, FloatArray]:
-        """Whitened design ``A`` (rows, N_LEVER + n_force) and target ``b`` for ``spec``."""
+    def design(self, spec: ModelSpec, phase: float | None = None
+               ) -> tuple[FloatArray, FloatArray]:
+        """Whitened design ``A`` (rows, N_LEVER + n_force) and target ``b`` for ``spec``
+        (drive phase ``phase``, default ``spec.drive_phase``).
+
+        The force and lever columns do not depend on the drive phase; they are cached per
+        structure (cleared when the whitening changes), so a change of the phase alone costs
+        two columns.
+        """
+        A0, b, w_cos, w_sin = self.parts(spec)
+        A = A0.copy()
+        ph = spec.drive_phase if phase is None else phase
+        A[:, 2] = -(math.cos(ph) * w_cos + math.sin(ph) * w_sin)
+        return A, b
+
+    def parts(self, spec: ModelSpec) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """:meth:`design_parts`, cached per structure (the drive phase does not enter)."""
+        key = spec if spec.drive_phase == 0.0 else spec.replace(drive_phase=0.0)
+        hit = self._cache.get(key)
+        if hit is None:
+            if len(self._cache) > 512:
+                self._cache.clear()
+            hit = self.design_parts(spec)
+            self._cache[key] = hit
+        return hit
+
+    def design_parts(self, spec: ModelSpec
+                     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Whitened lever and force columns (drive column zero), target, and the whitened
+        drive basis ``W[:, 1]``, ``W[:, n_h + 1]`` (cos and sin of the phase)."""
         o = self.orbit
         n = self._n
         x, v, X = o.true_orbit(spec)
@@ -267,13 +299,14 @@ class HarmonicBalance:
             h2 = 1.0 / (ratio**2 - (n * o.omega) ** 2 + 1j * n * o.omega * ratio / q2)
             G = 1.0 + g2 * self._lever0 * h2
         XG = X / G
-        drive = np.zeros(n.size, complex)
-        drive[1] = -np.exp(-1j * spec.drive_phase)
+        drive = np.zeros(n.size, complex)                     # the phase goes in by design()
         A = np.vstack([XG, 1j * n * o.omega * XG, drive, F])  # (N_LEVER + m, n_h + 1)
         b = (n * o.omega) ** 2 * XG
         Ar = to_real(A).T
         br = to_real(b)
-        return self._W @ Ar, self._W @ br
+        # drive column -e^{-i phi} at n = 1: real rows 1 (-cos phi) and n_h + 1 (-sin phi)
+        return (self._W @ Ar, self._W @ br, self._W[:, 1].copy(),
+                self._W[:, 1 + o.n_h].copy())
 
     def bounds(self, spec: ModelSpec) -> tuple[FloatArray, FloatArray]:
         """Boxes of ``[K, D, B, c_1..c_m]``: calibration boxes and physical signs."""
@@ -295,7 +328,7 @@ class HarmonicBalance:
                 hi[N_LEVER + j] = 0.0
         return lo, hi
 
-    def _prior_rows(self, p: int) -> tuple[FloatArray, FloatArray]:
+    def prior_rows(self, p: int) -> tuple[FloatArray, FloatArray]:
         """Prior rows ``P`` and targets ``t`` (residual ``P coef - t``, in sigma units)."""
         fc = self.orbit.drive_amplitude
         rel, sk = self.prior_rel, self.stiffness_prior
@@ -308,7 +341,7 @@ class HarmonicBalance:
 
     def prior_residual(self, coef: FloatArray) -> FloatArray:
         """The calibration-prior rows of the residual for ``coef`` (sigma units)."""
-        P, t = self._prior_rows(coef.size)
+        P, t = self.prior_rows(coef.size)
         return P @ coef - t
 
     def solve(self, spec: ModelSpec, values: tuple[float, ...] = ()) -> Solution:
@@ -316,7 +349,7 @@ class HarmonicBalance:
         A, b = self.design(spec)
         p = A.shape[1]
         lo, hi = self.bounds(spec)
-        P, t = self._prior_rows(p)
+        P, t = self.prior_rows(p)
         Af = np.vstack([A, P])
         bf = np.concatenate([b, t])
         # column scaling for conditioning

@@ -1,71 +1,82 @@
-"""`Diagnoser`: what the baseline simulation gets wrong, which cause explains it, and the gain.
+"""`Diagnoser`: what the baseline simulation gets wrong, which causes explain it, the gain.
 
-Pipeline (``physics.md`` section 7 done automatically, ``design.md`` section 3):
+Pipeline (``physics.md`` section 7 done automatically, ``design.md`` section 3), on an
+experiment (the observations of one file that share the cantilever and the tip--sample law;
+one steady record is an experiment of one):
 
-1. **Calibrate** the trace (``afmlearn.preprocess``; its ``/labels`` are never read, its file
-   name never looked at) and split off the last ``heldout_fraction`` of the drive periods:
-   they are never used for fitting.
-2. **Denoise** the fit span (Fourier series in the drive phase) and build the whitened
-   harmonic balance (:class:`~afmlearn.diagnose.balance.HarmonicBalance`): residuals in units
-   of the orbit's own noise, calibration priors on ``K``, ``D``, ``B``.
-3. **Baseline**: one mode, VdW--DMT sphere contact (``z^-2`` held at ``a0``, ``delta^1.5``),
-   fitted over ``a0`` and the drive phase; its Hill operator then whitens every later fit.
-4. **Hypotheses**: each cause's extension is fitted (grid, then joint refinement on the
-   whitened harmonic balance), then every model, baseline included, is refined by output
-   error (:mod:`.output_error`: its own periodic orbit, found by shooting, against the
-   measured harmonics). The evidence is the likelihood-ratio statistic ``delta_chi2`` (output-
-   error chi2 of the baseline minus that of the extension, in orbit-noise units) against a
-   threshold calibrated on null traces (:class:`NullCalibration`; the look-elsewhere effect
-   of each extension's grid search is in it).
-5. **Held-out test**: baseline and every extension are simulated from the measured state
-   (same drive phase as the held-out start) for about 2.9 Q periods, so that each settles on
-   its own attractor, then through the held-out span, and compared with the held-out
-   measurement (denoised on its own): ``gain = 1 - NRMSE(extended) / NRMSE(baseline)``. The
-   steady orbit is what a simulation of the model predicts; starting the comparison on the
-   measured state instead would score the decay of the initial mismatch.
-6. **Name**: among the extensions whose evidence exceeds its threshold and whose held-out
-   gain exceeds ``min_gain``, the one with the largest penalised evidence (see
-   :func:`name_cause` for why not the largest gain); ``none`` when there is none.
-   ``confidence`` is the softmax weight of the chosen cause over the penalised evidences
-   (``none`` counting zero).
+1. **Observations** (:mod:`.observation`): every record is checked and calibrated (its
+   ``/labels`` are never read, its file name never looked at) and rescaled to one common
+   ``L_ref``; ramps are cut into quasi-steady windows.
+2. **Denoise** each observation (Fourier series in the drive phase) and build its whitened
+   harmonic balance; stack them (:class:`~afmlearn.diagnose.joint.JointBalance`): one force
+   law, ``K``, ``D``, ``B``, ``a0`` for all, one drive phase per observation (with the
+   recorded phase as a prior when the file has it).
+3. **Baseline**: one mode, VdW--DMT sphere, fitted jointly; its Hill operators then whiten
+   every later fit; refined by output error (each observation's own periodic orbit against
+   its measured harmonics, phases projected out).
+4. **Causes, step by step**: every hypothesis extends the current model and is fitted the
+   same way; its evidence is the output-error chi-square drop against a threshold calibrated
+   on null data (:class:`NullCalibration`); its held-out gain comes from data never fitted
+   (:mod:`.heldout`: the last periods of a single record, or whole set-points left out and
+   predicted by refits without them). The significant cause with the largest penalised
+   evidence is named (:func:`name_cause`), the model is extended with it, and the remaining
+   causes are tested against the *extended* model; the search stops when none is
+   significant.
+5. **Report**: ``cause_`` is the first cause, ``causes_`` every step (each with the gain it
+   adds), ``extended_`` the model with all of them, ``gain_`` its held-out gain over the
+   baseline, and per observation the held-out NRMSE of both (``observations_``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from importlib import resources
-from typing import Any, final
+from typing import Any, Literal, final
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline
+from scipy import stats
 from tqdm.auto import tqdm
 
-from afmlearn.io import Trace
 from afmlearn.metrics import nrmse
-from afmlearn.preprocess import Calibrated, calibrate, check_trace, fit_harmonics
+from afmlearn.preprocess import Calibrated, fit_harmonics
 from afmlearn.preprocess.harmonics import HarmonicFit
 
-from .balance import HarmonicBalance, PeriodicOrbit, Solution, invert_detector
-from .fit import fit_baseline, fit_extension, refine_output_error
-from .hypotheses import AbstractHypothesis, Context, default_hypotheses
+from .balance import HarmonicBalance, PeriodicOrbit, Solution
+from .fit import (
+    Build,
+    fit_baseline,
+    fit_extension,
+    refine_balance,
+    refine_output_error,
+    structure,
+)
+from .heldout import HeldOut, phase_for, sample_orbit, steady_output
+from .hypotheses import AbstractHypothesis, Context, Parameter, default_hypotheses
+from .joint import JointBalance
 from .model import DiagnosisModel
-from .output_error import OutputError, periodic_orbit
-from .spec import neck_state
+from .observation import Observation, as_traces, build_observations, folds
+from .output_error import OutputError
 
-__all__ = ["Diagnoser", "NullCalibration", "Candidate", "HeldOut", "name_cause"]
+__all__ = ["Diagnoser", "NullCalibration", "Candidate", "Step", "HeldOut",
+           "ObservationResult", "name_cause"]
 
 FloatArray = NDArray[np.float64]
+
+#: family-wise false-cause rate held by the thresholds (Bonferroni over the causes)
+FAMILY_ALPHA = 0.05
 
 
 @final
 @dataclass(frozen=True)
 class NullCalibration:
-    """Significance thresholds calibrated on null traces (the baseline is the truth).
+    """Significance thresholds calibrated on null data (the baseline is the truth).
 
     Attributes
     ----------
@@ -82,12 +93,25 @@ class NullCalibration:
     source: str = ""
 
     @classmethod
-    def default(cls) -> NullCalibration:
-        """The calibration shipped with afmlearn (``null_calibration.json``)."""
+    def default(cls, kind: Literal["single", "series"] = "single") -> NullCalibration:
+        """The calibration shipped with afmlearn (``null_calibration.json``).
+
+        ``kind="series"`` reads its ``"series"`` section (thresholds calibrated on null
+        set-point series, whose statistic is the joint chi-square drop) when there is one,
+        else the single-record thresholds (and says so in ``source``).
+        """
+        if kind not in ("single", "series"):
+            raise ValueError(f"kind must be 'single' or 'series', got {kind!r}")
         text = resources.files("afmlearn.diagnose").joinpath("null_calibration.json").read_text()
         d = json.loads(text)
+        note = ""
+        if kind == "series":
+            if isinstance(d.get("series"), dict):
+                d = d["series"]
+            else:
+                note = " [single-record thresholds: no series calibration shipped]"
         return cls(thresholds={k: float(v) for k, v in d["thresholds"].items()},
-                   min_gain=float(d["min_gain"]), source=str(d.get("source", "")))
+                   min_gain=float(d["min_gain"]), source=str(d.get("source", "")) + note)
 
     def threshold(self, cause: str) -> float:
         if cause not in self.thresholds:
@@ -98,21 +122,15 @@ class NullCalibration:
 
 @final
 @dataclass
-class HeldOut:
-    """Held-out span: measured, denoised, and each model's simulation (all shape (n,))."""
-
-    tau: FloatArray
-    measured: FloatArray
-    reference: FloatArray
-    reference_rate: FloatArray
-    simulated: dict[str, FloatArray] = field(default_factory=dict)
-    simulated_rate: dict[str, FloatArray] = field(default_factory=dict)
-
-
-@final
-@dataclass
 class Candidate:
-    """One tested cause: its fitted extension and the evidence for it."""
+    """One tested cause: its fitted extension and the evidence for it.
+
+    ``model`` is the extension at the representative observation; ``solution`` the joint fit
+    (output error; ``phases`` per observation); ``heldout_nrmse`` the mean over the held-out
+    observations and ``nrmse_per_observation`` each (NaN where not held out, or everywhere
+    when the evidence was below the chi-square point and the gain was not computed: then
+    ``gain`` is NaN).
+    """
 
     cause: str
     model: DiagnosisModel
@@ -124,6 +142,9 @@ class Candidate:
     significant: bool
     evidence: str
     n_parameters: int
+    solution: Solution
+    nrmse_per_observation: FloatArray
+    details: dict[str, Any] = field(default_factory=dict)
 
     @property
     def score(self) -> float:
@@ -132,73 +153,197 @@ class Candidate:
 
 
 @final
+@dataclass
+class Step:
+    """One cause named in the step-by-step search, tested against the model before it.
+
+    ``gain`` is the held-out gain this step adds (``1 - NRMSE(after) / NRMSE(before)``),
+    ``candidates`` every cause tested in this step.
+    """
+
+    cause: str
+    gain: float
+    evidence: str
+    delta_chi2: float
+    threshold: float
+    confidence: float
+    candidates: list[Candidate]
+
+
+@final
+@dataclass
+class ObservationResult:
+    """What the diagnosis says about one observation (figures, per-set-point report)."""
+
+    index: int
+    kind: str
+    gap_m: float
+    orbit: PeriodicOrbit
+    heldout: HeldOut
+    baseline: DiagnosisModel
+    extended: DiagnosisModel
+    baseline_nrmse: float
+    extended_nrmse: float
+    fitted: bool = True
+
+
+@dataclass(eq=False)
+class _Fit:
+    """A fitted model structure: joint output-error solution, its equation-error start, the
+    structure it was refined in, its key and held-out NRMSE per observation."""
+
+    sol: Solution
+    hb: Solution
+    build: Build
+    params: list[Parameter]
+    key: str
+    nrmse: FloatArray
+
+
+@final
+class _Probe:
+    """:class:`~afmlearn.diagnose.hypotheses.base.Probe` of one fitted extension."""
+
+    def __init__(self, traces: Sequence[Any], jb: JointBalance, fit: _Fit) -> None:
+        self.traces = traces
+        self._jb = jb
+        self._fit = fit
+
+    def profile(self, name: str, values: Sequence[float]) -> FloatArray:
+        params = self._fit.params
+        k = [p.name for p in params].index(name)
+        rest = [p for j, p in enumerate(params) if j != k]
+        hb = self._fit.hb
+        start = [v for j, v in enumerate(hb.values) if j != k]
+        phases = hb.phases
+        out = []
+        for value in values:
+            def build(v: Sequence[float], value: float = float(value)) -> Any:
+                return self._fit.build([*v[:k], value, *v[k:]])
+            sol = refine_balance(self._jb, build, rest, start, phases, None, 12)
+            out.append(sol.chi2)
+            start = list(sol.values)
+            phases = sol.phases
+        return np.asarray(out, float)
+
+
+@final
 class Diagnoser:
-    """Diagnose one steady-state trace (scikit-learn style; options keyword-only).
+    """Diagnose an experiment (scikit-learn style; options keyword-only).
 
     Parameters
     ----------
     hypotheses : sequence of AbstractHypothesis, optional
         Causes to test; default every cause of design.md section 3.
     calibration : NullCalibration, optional
-        Significance thresholds; default :meth:`NullCalibration.default`.
+        Significance thresholds; default :meth:`NullCalibration.default` of the experiment's
+        kind ("single" for one record, "series" for several observations).
     heldout_fraction : float
-        Share of the periods at the end never used for fitting, in [0.1, 0.5].
+        One record: share of the periods at the end never used for fitting, in [0.1, 0.5].
+    max_folds : int
+        Several observations: leave one out when there are at most this many, else this many
+        interleaved folds in gap order (>= 2).
+    max_causes : int
+        Most causes named step by step (>= 1).
     min_harmonics, max_harmonics : int
-        Fourier order of the denoised fit span: the noise-floor order, clipped to this range
-        (and below the Nyquist frequency).
+        Fourier order of each denoised observation: the noise-floor order, clipped to this
+        range (and below the Nyquist frequency).
     grid : int
         Phase-grid points per period for the force columns (power of two, >= 256).
+    drive_phase_sd : float
+        Standard deviation [rad] of a recorded drive phase (its prior in the fit), > 0.
+    ramp_window_periods : float
+        Drive periods per quasi-steady window of a ramp (>= 10).
+    max_ramp_windows : int
+        Most windows taken from one ramp (>= 2).
     max_heldout_periods : float
-        Longest simulated held-out span in drive periods.
+        Longest held-out span compared per observation, in drive periods.
     max_settle_periods : int
-        Cap on the periods each model is run before the held-out span (it starts there from
-        the measured state and settles on its own attractor: about 2.9 Q periods).
+        Cap on the settle run used when a model's periodic orbit cannot be shot.
+    joint_nfev : int
+        Output-error iterations of each extension's joint fit (several observations; one
+        record keeps 25 from three starts).
+    fold_nfev : int
+        Output-error iterations of each refit without the held-out set-points (warm
+        started from the fit on all of them).
+    screen_chi2 : float
+        Several observations: an extension whose equation-error chi-square drop is below
+        this is reported with no evidence (drop 0) without the costly output-error fit (>= 0;
+        0 fits every extension).
+    all_gains : bool
+        Measure the held-out gain of every candidate whose evidence exceeds the chi-square
+        point of its parameter count (for benchmarks that re-name with other thresholds);
+        default: only as far as the decision needs (the others are NaN).
     progress : bool
         Print the stages and a progress bar over the causes to stderr.
 
     Attributes
     ----------
-    calibrated_ : Calibrated
-    calibration_ : NullCalibration
-        The significance thresholds used.
-    orbit_ : PeriodicOrbit
-    baseline_ : DiagnosisModel
-    candidates_ : list of Candidate
-        One per hypothesis, in the order tested.
+    observations_ : list of ObservationResult
+        One per observation: denoised orbit, held-out span and predictions, both models at
+        that observation, their held-out NRMSE.
     cause_ : str
-        The named cause, or ``"none"``.
-    extended_ : DiagnosisModel
-        The chosen extension (the baseline when the cause is ``none``).
+        The first cause named, or ``"none"``.
+    causes_ : list of Step
+        Every cause named, in order, each tested against the model extended by the ones
+        before it (empty for ``none``).
+    candidates_ : list of Candidate
+        The first step's candidates, one per hypothesis, in the order tested.
+    baseline_, extended_ : DiagnosisModel
+        Baseline and the model extended by every cause, at the representative observation
+        (the smallest rest gap); the extended model is the baseline for ``none``.
     gain_ : float
-        ``1 - NRMSE(extended) / NRMSE(baseline)`` on the held-out span (0 for ``none``).
+        ``1 - NRMSE(extended) / NRMSE(baseline)`` on the held-out data (0 for ``none``).
     confidence_ : float
+        Of the first step's answer.
     baseline_nrmse_, extended_nrmse_ : float
-    heldout_ : HeldOut
-    heldout_start_ : int
+        Mean held-out NRMSE over the held-out observations.
+    exponent_, exponent_interval_, exponent_bounded_ : float, (float, float), bool or None
+        Contact exponent of the contact_geometry extension, its 95 % profile-likelihood
+        interval and whether the data bound it (None when it was not tested).
+    design_ : str
+        ``"tail"`` (one record: last periods held out) or ``"leave-one-out"`` /
+        ``"k-fold"`` (whole set-points held out).
+    folds_ : list of list of int
+        Held-out observations of each refit (``[[0]]`` for one record).
+    orbit_, heldout_, calibrated_, heldout_start_ : the representative observation's.
+    calibration_ : NullCalibration
     spectral_error_ : dict of str to float
-        Relative error of the held-out harmonic spectrum, baseline and extended.
+        Relative error of the held-out harmonic spectrum, baseline and extended
+        (representative observation).
     energy_ : dict of str to float
-        Energy into the sample per cycle [k L_ref^2]: "measured" (drive/damping balance),
-        "baseline", "extended".
+        Energy into the sample per cycle [k L_ref^2] at the representative observation:
+        "measured" (drive/damping balance), "baseline", "extended".
     free_harmonics_ : dict or None
-        Second and third harmonics of the free trace in noise units, when there is one.
     warnings_ : list of str
     runtime_s_ : float
     """
 
     def __init__(self, *, hypotheses: list[AbstractHypothesis] | None = None,
                  calibration: NullCalibration | None = None, heldout_fraction: float = 0.3,
-                 min_harmonics: int = 20, max_harmonics: int = 60, grid: int = 4096,
+                 max_folds: int = 4, max_causes: int = 3, min_harmonics: int = 20,
+                 max_harmonics: int = 60, grid: int = 4096, drive_phase_sd: float = 0.02,
+                 ramp_window_periods: float = 20.0, max_ramp_windows: int = 8,
                  max_heldout_periods: float = 150.0, max_settle_periods: int = 3000,
-                 progress: bool = False) -> None:
+                 joint_nfev: int = 10, fold_nfev: int = 6, screen_chi2: float = 2.0,
+                 all_gains: bool = False, progress: bool = False) -> None:
         self.hypotheses = hypotheses
         self.calibration = calibration
         self.heldout_fraction = heldout_fraction
+        self.max_folds = max_folds
+        self.max_causes = max_causes
         self.min_harmonics = min_harmonics
         self.max_harmonics = max_harmonics
         self.grid = grid
+        self.drive_phase_sd = drive_phase_sd
+        self.ramp_window_periods = ramp_window_periods
+        self.max_ramp_windows = max_ramp_windows
         self.max_heldout_periods = max_heldout_periods
         self.max_settle_periods = max_settle_periods
+        self.joint_nfev = joint_nfev
+        self.fold_nfev = fold_nfev
+        self.screen_chi2 = screen_chi2
+        self.all_gains = all_gains
         self.progress = progress
 
     # ------------------------------------------------------------------ settings
@@ -210,6 +355,11 @@ class Diagnoser:
         if not 0.1 <= float(self.heldout_fraction) <= 0.5:
             raise ValueError(f"heldout_fraction must be in [0.1, 0.5], "
                              f"got {self.heldout_fraction!r}")
+        for name, low in (("max_folds", 2), ("max_causes", 1), ("max_ramp_windows", 2),
+                          ("joint_nfev", 1), ("fold_nfev", 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < low:
+                raise ValueError(f"{name} must be an integer >= {low}, got {v!r}")
         if not (isinstance(self.min_harmonics, int) and self.min_harmonics >= 2):
             raise ValueError(f"min_harmonics must be an integer >= 2, got {self.min_harmonics!r}")
         if not (isinstance(self.max_harmonics, int) and self.max_harmonics >= self.min_harmonics):
@@ -220,250 +370,376 @@ class Diagnoser:
             raise ValueError(f"grid must be a power of two >= 256, got {g!r}")
         if not float(self.max_heldout_periods) >= 1.0:
             raise ValueError(f"max_heldout_periods must be >= 1, got {self.max_heldout_periods!r}")
+        if not float(self.screen_chi2) >= 0.0:
+            raise ValueError(f"screen_chi2 must be >= 0, got {self.screen_chi2!r}")
+        if not float(self.drive_phase_sd) > 0.0:
+            raise ValueError(f"drive_phase_sd must be > 0 rad, got {self.drive_phase_sd!r}")
+        if not float(self.ramp_window_periods) >= 10.0:
+            raise ValueError(f"ramp_window_periods must be >= 10, got "
+                             f"{self.ramp_window_periods!r}")
 
     def _log(self, msg: str) -> None:
         if self.progress:
             print(f"[diagnose {time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
 
     # ------------------------------------------------------------------ fit
-    def fit(self, data: Trace | Calibrated, *, row: int | None = None) -> Diagnoser:
-        """Diagnose one trace (one row of a sweep).
+    def fit(self, data: Any, *, row: int | None = None) -> Diagnoser:
+        """Diagnose an experiment.
 
         Parameters
         ----------
-        data : Trace or Calibrated
-            The recording (a Trace is checked and calibrated; its labels are never read).
+        data : afmlearn.io.Experiment, Trace or list of 1-D Traces
+            The recordings (a Trace is wrapped as an experiment: a set-point series gives one
+            observation per row; its labels are never read).
         row : int, optional
-            Row of a sweep.
+            Diagnose one row only (required for a sweep, whose rows are different drive
+            frequencies).
 
         Raises
         ------
         afmlearn.preprocess.InputError
             Unusable data (NaN, clipped, < 20 samples per period, too short).
         ValueError
-            Bad settings, a time-varying rest gap, or too few periods.
+            Bad settings, observations that do not share the calibration, too few periods.
         """
         t0 = time.perf_counter()
         self._check()
-        calib = self.calibration or NullCalibration.default()
+        hyps = default_hypotheses() if self.hypotheses is None else list(self.hypotheses)
+        self.warnings_: list[str] = []
+        traces = as_traces(data, row)
+        obs = build_observations(traces, phase_sd=float(self.drive_phase_sd),
+                                 window_periods=float(self.ramp_window_periods),
+                                 max_windows=self.max_ramp_windows, warnings=self.warnings_)
+        n_obs = len(obs)
+        single = n_obs == 1
+        calib = self.calibration or NullCalibration.default("single" if single else "series")
         if not isinstance(calib, NullCalibration):
             raise ValueError(f"calibration must be a NullCalibration, got {calib!r}")
         self.calibration_ = calib
-        hyps = default_hypotheses() if self.hypotheses is None else list(self.hypotheses)
-        free = None
-        if isinstance(data, Trace):
-            check_trace(data, row=row)
-            cal = calibrate(data, row=row)
-            free = data.free_deflection_m
-        elif isinstance(data, Calibrated):
-            cal = data
-        else:
-            raise ValueError(f"data must be a Trace or Calibrated, got {type(data).__name__}")
-        self.warnings_: list[str] = []
-        if not np.isscalar(cal.gap) and np.ptp(np.asarray(cal.gap)) > 1e-9:
-            raise ValueError("data: the rest gap varies in time (an approach ramp); the "
-                             "diagnosis needs a steady-state record at one gap")
-        if cal.excitation_assumed:
+        cal0 = obs[0].cal
+        if cal0.excitation_assumed:
             self.warnings_.append("excitation not recorded in the file: tip excitation assumed")
-        if cal.excitation == "base":
+        if cal0.excitation == "base":
             self.warnings_.append("base excitation: the dither's own share of the gap is "
                                   "neglected")
-        if cal.drive_amplitude is None:
+        fcs = [o.cal.drive_amplitude for o in obs if o.cal.drive_amplitude is not None]
+        drive = float(np.median(fcs)) if fcs else None
+        if drive is None:
             self.warnings_.append("no free data: the drive amplitude is unconstrained, so "
                                   "dissipation is only seen through harmonics (weak)")
-        self.calibrated_ = cal
-        spp = cal.samples_per_period
-        n_periods = cal.n_samples / spp
+        # -- spans, denoised orbits, the joint balance
+        self._log(f"denoising {n_obs} observation(s)")
+        spans = [self._span(o, single) for o in obs]
+        orbits = [self._orbit(o, s, drive) for o, s in zip(obs, spans, strict=True)]
+        hbs = [HarmonicBalance(orb) for orb in orbits]
+        jb = JointBalance(hbs, [o.phase_prior for o in obs])
+        self.free_harmonics_ = (_free_harmonics(obs[0].trace.free_deflection_m, cal0)
+                                if obs[0].trace.free_deflection_m is not None else None)
+        zs = [orb.gap - orb.y for orb in orbits]
+        ctx = Context(length_m=cal0.scales.length,
+                      amplitude=float(max(abs(orb.Y[1]) for orb in orbits)),
+                      z_min=float(min(z.min() for z in zs)),
+                      z_max=float(max(z.max() for z in zs)),
+                      tip_radius=(cal0.tip_radius if cal0.tip_radius else
+                                  10e-9 / cal0.scales.length),
+                      higher_mode_ratios=tuple(np.atleast_1d(cal0.higher_mode_ratios).tolist())
+                      if cal0.higher_mode_ratios is not None else (),
+                      free_detector=(self.free_harmonics_ or {}).get("detector"))
+        # -- held-out design and references
+        self.folds_ = [[0]] if single else folds([o.gap for o in obs], self.max_folds)
+        self.design_ = ("tail" if single else "leave-one-out"
+                        if all(len(f) == 1 for f in self.folds_) else "k-fold")
+        held = [self._reference(o, s, orb, single)
+                for o, s, orb in zip(obs, spans, orbits, strict=True)]
+        self._obs, self._orbits, self._held, self._jb = obs, orbits, held, jb
+        # -- baseline (twice: the second whitened by the first's Hill operators)
+        self._log("baseline")
+        b0 = fit_baseline(jb, ctx)
+        for i, hb in enumerate(hbs):
+            hb.set_whitening(dataclasses.replace(
+                b0, spec=b0.spec.replace(drive_phase=b0.phases[i])))
+        base_hb = fit_baseline(jb, ctx)
+        oe = OutputError(jb, cal0.scales)
+        self._oe = oe
+        base, ok, build, params = refine_output_error(oe, [base_hb], None, base_hb, ctx)
+        if not ok:
+            self.warnings_.append("the baseline's periodic orbit did not converge exactly "
+                                  "(shooting); its chi2 is that of the last iterate")
+        base_fit = _Fit(base, base_hb, build, params, "none", np.empty(0))
+        base_fit.nrmse = self._heldout(base_fit)
+        # -- causes, step by step
+        rep = int(np.argmin([o.gap for o in obs]))
+        self._rep = rep
+        current = base_fit
+        remaining = list(hyps)
+        steps: list[Step] = []
+        first: list[Candidate] | None = None
+        conf0 = 1.0
+        tested: dict[str, dict[str, Any]] = {}
+        self._energies: dict[int, FloatArray] = {}
+        for k in range(self.max_causes):
+            if not remaining:
+                break
+            self._log(f"step {k + 1}: testing {len(remaining)} cause(s) against "
+                      f"{current.key}")
+            fits: list[_Fit] = []
+            cands: list[Candidate] = []
+            bar = tqdm(remaining, desc=f"diagnose: causes (step {k + 1})", unit="cause",
+                       disable=not self.progress, file=sys.stderr, leave=False)
+            for h in bar:
+                bar.set_postfix_str(h.cause)
+                f, c = self._test(h, current, ctx, calib, traces, tested, step=k)
+                fits.append(f)
+                cands.append(c)
+            self._gains(remaining, fits, cands, current, calib)
+            idx, conf = name_cause([c.delta_chi2 for c in cands], [c.gain for c in cands],
+                                   [c.threshold for c in cands], calib.min_gain)
+            if first is None:
+                first, conf0 = cands, conf
+            if idx is None:
+                break
+            c = cands[idx]
+            steps.append(Step(cause=c.cause, gain=c.gain, evidence=c.evidence,
+                              delta_chi2=c.delta_chi2, threshold=c.threshold, confidence=conf,
+                              candidates=cands))
+            current = fits[idx]
+            remaining = [h for h in remaining if h.cause != c.cause]
+            if remaining and k + 1 < self.max_causes and n_obs > 1:
+                # the next causes are tested against this model: converge it first, or any
+                # added freedom would show the unfinished fit as evidence
+                current.sol, _ = self._oe.refine(current.sol, current.build, current.params,
+                                                 max_nfev=25)
+        self.candidates_ = first or []
+        self.causes_ = steps
+        self.cause_ = steps[0].cause if steps else "none"
+        self.confidence_ = conf0
+        self._finish(base_fit, current, rep, obs, orbits, held, tested)
+        self.runtime_s_ = time.perf_counter() - t0
+        self._log(f"causes {[s.cause for s in steps] or ['none']} (gain {self.gain_:.3f}) in "
+                  f"{self.runtime_s_:.1f} s")
+        return self
+
+    # ------------------------------------------------------------------ pieces
+    def _span(self, o: Observation, single: bool) -> tuple[int, int]:
+        """Sample range fitted: the first periods of one record, all of a set-point."""
+        spp = o.cal.samples_per_period
+        n_periods = o.n_periods
+        if not single:
+            if n_periods < 5:
+                raise ValueError(f"data: observation {o.index} spans {n_periods:.1f} drive "
+                                 f"periods; need >= 5 per set-point")
+            return o.start, o.stop
         fit_periods = math.floor(n_periods * (1 - self.heldout_fraction))
         if fit_periods < 10 or n_periods - fit_periods < 3:
             raise ValueError(f"data: {n_periods:.1f} drive periods are too few; need >= 10 to "
                              f"fit and >= 3 held out (heldout_fraction "
                              f"{self.heldout_fraction})")
-        n_fit = int(round(fit_periods * spp))
-        self.heldout_start_ = n_fit
-        gap = float(np.mean(cal.gap))
-        # -- denoise the fit span
-        self._log("denoising")
-        nyq = max(int(spp / 2) - 1, 2)
-        hf0 = fit_harmonics(cal.tau[:n_fit], cal.x[:n_fit], cal.omega,
+        return o.start, o.start + int(round(fit_periods * spp))
+
+    def _orbit(self, o: Observation, span: tuple[int, int], drive: float | None
+               ) -> PeriodicOrbit:
+        cal = o.cal
+        s, e = span
+        nyq = max(int(cal.samples_per_period / 2) - 1, 2)
+        hf0 = fit_harmonics(cal.tau[s:e], cal.x[s:e], cal.omega,
                             max_harmonics=min(self.max_harmonics, nyq))
         n_h = int(min(max(hf0.n_harmonics, self.min_harmonics), self.max_harmonics, nyq))
         hf = (hf0 if hf0.n_harmonics == n_h else
-              fit_harmonics(cal.tau[:n_fit], cal.x[:n_fit], cal.omega, n_harmonics=n_h))
+              fit_harmonics(cal.tau[s:e], cal.x[s:e], cal.omega, n_harmonics=n_h))
         if not hf.is_periodic:
             self.warnings_.append(
-                f"the fit span is not periodic at the drive frequency (block test F = "
+                f"observation {o.index}: not periodic at the drive frequency (block test F = "
                 f"{hf.periodicity_statistic:.3g}): drift, a transient or a second frequency; "
                 f"the diagnosis assumes a steady orbit")
-        orbit = PeriodicOrbit(hf, gap=gap, quality_factor=cal.quality_factor,
-                              drive_amplitude=cal.drive_amplitude, grid=self.grid)
-        self.orbit_ = orbit
-        hb = HarmonicBalance(orbit)
-        z = gap - orbit.y
-        self.free_harmonics_ = _free_harmonics(free, cal) if free is not None else None
-        ctx = Context(length_m=cal.scales.length, amplitude=float(abs(orbit.Y[1])),
-                      z_min=float(z.min()), z_max=float(z.max()),
-                      tip_radius=(cal.tip_radius if cal.tip_radius else
-                                  10e-9 / cal.scales.length),
-                      higher_mode_ratios=tuple(np.atleast_1d(cal.higher_mode_ratios).tolist())
-                      if cal.higher_mode_ratios is not None else (),
-                      free_detector=(self.free_harmonics_ or {}).get("detector"))
-        # -- baseline (twice: the second with the Hill operator of the first)
-        self._log("baseline")
-        b0 = fit_baseline(hb, ctx)
-        hb.set_whitening(b0)
-        base_hb = fit_baseline(hb, ctx)
-        oe = OutputError(hb, cal.scales)
-        base, ok = refine_output_error(oe, [base_hb], None, base_hb, ctx)
-        if not ok:
-            self.warnings_.append("the baseline's periodic orbit did not converge exactly "
-                                  "(shooting); its chi2 is that of the last iterate")
-        self._hb = hb
-        self.baseline_ = self._model(base)
-        # -- held-out reference
-        held = self._heldout_reference(cal, n_fit, n_h)
-        self.heldout_ = held
-        base_nrmse = self._heldout_nrmse(self.baseline_, "none", held)
-        self.baseline_nrmse_ = base_nrmse
-        # -- hypotheses
-        cands: list[Candidate] = []
-        bar = tqdm(hyps, desc="diagnose: causes", unit="cause", disable=not self.progress,
-                   file=sys.stderr, leave=False)
-        for h in bar:
-            bar.set_postfix_str(h.cause)
-            try:
-                starts = fit_extension(hb, base_hb, h, ctx)
-                sol, _ = refine_output_error(oe, starts, h, base, ctx)
-            except (ArithmeticError, np.linalg.LinAlgError) as err:
-                # a numerical failure of one extension's search must not cost the report:
-                # the cause is recorded as untestable (its nested point, no evidence)
-                self.warnings_.append(f"{h.cause}: the extension's fit failed "
-                                      f"({type(err).__name__}: {err}); reported without "
-                                      f"evidence")
-                nv = h.nested_values(h.parameters(ctx))
-                spec = h.extend(base.spec, nv)
-                sol = Solution(spec=spec, coef=np.concatenate(
-                    [base.coef, np.zeros(spec.n_force - base.spec.n_force)]),
-                    residual=base.residual, chi2=base.chi2, values=(*base.values[:2], *nv))
-            model = self._model(sol)
-            d = float(base.chi2 - sol.chi2)
-            e = self._heldout_nrmse(model, h.cause, held)
-            gain = 1.0 - e / base_nrmse if math.isfinite(e) and base_nrmse > 0 else -math.inf
-            thr = calib.threshold(h.cause)
-            sig = bool(d > thr and gain > calib.min_gain)
-            energy = np.array([self._energy(self.baseline_), self._energy(model)])
-            cands.append(Candidate(
-                cause=h.cause, model=model, chi2=float(sol.chi2), delta_chi2=d, threshold=thr,
-                heldout_nrmse=float(e), gain=float(gain), significant=sig,
-                evidence=h.evidence(model, delta_chi2=d, gain=gain, energy=energy),
-                n_parameters=len(h.parameters(ctx)) + (model.spec.n_force
-                                                        - self.baseline_.spec.n_force)))
-        self.candidates_ = cands
-        # -- name the cause
-        idx, self.confidence_ = name_cause([c.delta_chi2 for c in cands],
-                                           [c.gain for c in cands],
-                                           [c.threshold for c in cands], calib.min_gain)
-        chosen = None if idx is None else cands[idx]
-        self.cause_ = chosen.cause if chosen else "none"
-        self.extended_ = chosen.model if chosen else self.baseline_
-        self.extended_nrmse_ = chosen.heldout_nrmse if chosen else base_nrmse
-        self.gain_ = chosen.gain if chosen else 0.0
-        self.spectral_error_ = {
-            "baseline": self._spectral_error(held.simulated["none"], held),
-            "extended": self._spectral_error(held.simulated[self.cause_], held)}
-        self.energy_ = {"measured": self._energy_measured(),
-                        "baseline": self._energy(self.baseline_),
-                        "extended": self._energy(self.extended_)}
-        self.runtime_s_ = time.perf_counter() - t0
-        self._log(f"cause {self.cause_} (gain {self.gain_:.3f}) in {self.runtime_s_:.1f} s")
-        return self
+        return PeriodicOrbit(hf, gap=o.gap, quality_factor=cal.quality_factor,
+                             drive_amplitude=drive, grid=self.grid)
 
-    # ------------------------------------------------------------------ pieces
-    def _model(self, sol: Solution) -> DiagnosisModel:
-        cal = self.calibrated_
-        return DiagnosisModel(spec=sol.spec, coef=sol.coef.copy(), omega=cal.omega,
-                              gap=self.orbit_.gap, scales=cal.scales)
-
-    def _heldout_reference(self, cal: Calibrated, i0: int, n_h: int) -> HeldOut:
+    def _reference(self, o: Observation, span: tuple[int, int], orbit: PeriodicOrbit,
+                   single: bool) -> HeldOut:
+        """The held-out span of an observation, denoised on its own."""
+        cal = o.cal
         n_max = int(round(self.max_heldout_periods * cal.samples_per_period))
-        tau = cal.tau[i0:i0 + n_max]
-        y = cal.x[i0:i0 + n_max]
-        h = fit_harmonics(tau, y, cal.omega, n_harmonics=min(n_h, max(y.size // 4 - 1, 1)))
-        return HeldOut(tau=tau, measured=y, reference=h.evaluate(tau),
-                       reference_rate=h.evaluate(tau, 1))
+        if single:
+            i0 = span[1]
+            tau, y = cal.tau[i0:min(i0 + n_max, o.stop)], cal.x[i0:min(i0 + n_max, o.stop)]
+            h = fit_harmonics(tau, y, cal.omega,
+                              n_harmonics=min(orbit.n_h, max(y.size // 4 - 1, 1)))
+            return HeldOut(tau=tau, measured=y, reference=h.evaluate(tau),
+                           reference_rate=h.evaluate(tau, 1))
+        e = min(o.start + n_max, o.stop)
+        tau, y = cal.tau[o.start:e], cal.x[o.start:e]
+        n = np.arange(orbit.n_h + 1)
+        ph = np.exp(1j * np.outer(cal.omega * tau, n))
+        return HeldOut(tau=tau, measured=y, reference=np.real(ph @ orbit.Y),
+                       reference_rate=np.real(ph @ (1j * n * cal.omega * orbit.Y)))
 
-    def _initial_state(self, model: DiagnosisModel, held: HeldOut) -> tuple[FloatArray, bool]:
-        """``[q1, q1', q2, q2']`` and the neck state at the held-out start."""
-        y0, yd0 = float(held.reference[0]), float(held.reference_rate[0])
-        s = model.spec
-        if s.detector is not None:
-            b2, b3 = s.detector
-            x0 = float(invert_detector(np.array([y0]), b2, b3)[0])
-            v0 = yd0 / (1.0 + 2 * b2 * x0 + 3 * b3 * x0**2)
-        else:
-            x0, v0 = y0, yd0
-        o = self.orbit_
-        theta0 = float(np.mod(model.omega * held.tau[0], 2 * np.pi))
-        grid = np.append(o.theta, 2 * np.pi)
-        q2, q2d = model.mode2_orbit(o)
-        q20 = float(np.interp(theta0, grid, np.append(q2, q2[0])))
-        q2d0 = float(np.interp(theta0, grid, np.append(q2d, q2d[0])))
-        x, _, _ = o.true_orbit(s)
-        att = neck_state(model.gap - x, s.a0, s.neck_length)
-        k = int(round(theta0 / (2 * np.pi) * o.grid)) % o.grid
-        return np.array([x0 - q20, v0 - q2d0, q20, q2d0]), bool(att[k])
+    def _test(self, h: AbstractHypothesis, current: _Fit, ctx: Context,
+              calib: NullCalibration, traces: Sequence[Any],
+              tested: dict[str, dict[str, Any]], *, step: int) -> tuple[_Fit, Candidate]:
+        """Fit ``h``'s extension of ``current``: its evidence and details (the held-out gain
+        is added by :meth:`_gains`)."""
+        jb, oe = self._jb, self._oe
+        if jb.n_obs == 1:
+            starts = fit_extension(jb, current.hb, h, ctx)
+            sol, _, build, params = refine_output_error(oe, starts, h, current.sol, ctx)
+        else:   # joint fits cost n_obs orbits per evaluation: one start, fewer iterations
+            starts = fit_extension(jb, current.hb, h, ctx, n_starts=min(h.n_starts, 2))
+            if current.hb.chi2 - starts[0].chi2 < self.screen_chi2:
+                # no equation-error evidence at all: the output error is not run (measured on
+                # series: the equation-error drop is at least the output-error drop except
+                # for a second mode, where it is far larger)
+                build, params = structure(h, current.sol.spec, ctx)
+                nv = h.nested_values(params[1:])
+                vals = (current.sol.values[0], *nv)
+                spec = build(vals)
+                sol = dataclasses.replace(current.sol, spec=spec, values=vals,
+                                          coef=spec.embed(current.sol.spec, current.sol.coef))
+            else:
+                sol, _, build, params = refine_output_error(
+                    oe, starts[:1], h, current.sol, ctx, max_nfev=self.joint_nfev,
+                    nested="fallback" if step == 0 else "always")
+        key = h.cause if current.key == "none" else f"{current.key}+{h.cause}"
+        fit = _Fit(sol, starts[0], build, params, key, np.full(jb.n_obs, np.nan))
+        d = float(current.sol.chi2 - sol.chi2)
+        n_par = len(params) - 1 + (sol.spec.n_force - current.sol.spec.n_force)
+        thr = calib.threshold(h.cause)
+        rep = self._rep
+        model = oe.model(rep, sol.spec, sol.coef, sol.phases[rep])
+        before = oe.model(rep, current.sol.spec, current.sol.coef, current.sol.phases[rep])
+        if h.cause not in tested:
+            tested[h.cause] = h.details(model, _Probe(traces, jb, fit))
+        energy = np.array([self._energy(before), self._energy(model)])
+        cand = Candidate(cause=h.cause, model=model, chi2=float(sol.chi2), delta_chi2=d,
+                         threshold=thr, heldout_nrmse=math.nan, gain=math.nan,
+                         significant=False, evidence="", n_parameters=n_par, solution=sol,
+                         nrmse_per_observation=fit.nrmse, details=tested[h.cause])
+        cand.evidence = self._evidence_text(h, cand, energy)
+        self._energies[id(cand)] = energy
+        self._log(f"  {h.cause}: chi2 drop {d:.2f} (equation error "
+                  f"{current.hb.chi2 - starts[0].chi2:.2f}), threshold {thr:.2f}")
+        return fit, cand
 
-    def _heldout_nrmse(self, model: DiagnosisModel, key: str, held: HeldOut) -> float:
-        """Held-out NRMSE of the model's steady orbit (stores the simulated trace)."""
-        y, v = self._steady_prediction(model, held)
-        if y is None:
-            cal = self.calibrated_
-            state, att = self._initial_state(model, held)
-            dtau = float(cal.tau[1] - cal.tau[0])
-            sub = max(1, math.ceil(400 / cal.samples_per_period))
-            x, v = model.simulate(state, attached0=att, tau0=float(held.tau[0]), dtau=dtau,
-                                  n_samples=held.tau.size, substeps=sub,
-                                  settle_periods=OutputError.settle_periods(
-                                      model, cap=self.max_settle_periods))
-            y = model.measured(x)
-        held.simulated[key] = y
-        held.simulated_rate[key] = v
-        if not np.all(np.isfinite(y)):
+    def _evidence_text(self, h: AbstractHypothesis, c: Candidate, energy: FloatArray) -> str:
+        text = h.evidence(c.model, delta_chi2=c.delta_chi2, gain=c.gain, energy=energy)
+        if c.details.get("text"):
+            text += f"; {c.details['text']}"
+        return text
+
+    def _gains(self, hyps: Sequence[AbstractHypothesis], fits: list[_Fit],
+               cands: list[Candidate], current: _Fit, calib: NullCalibration) -> None:
+        """Held-out gains: of every candidate above the chi-square point of its parameter
+        count (``all_gains``), else only as far as the decision needs: in the order of the
+        penalised evidence among the significant ones, until one has a gain above
+        ``min_gain`` (the rule of :func:`name_cause`; the rest stay NaN)."""
+        order = sorted(range(len(cands)), key=lambda j: cands[j].threshold
+                       - cands[j].delta_chi2)
+        for j in order:
+            c, f, h = cands[j], fits[j], hyps[j]
+            point = float(stats.chi2.ppf(1 - FAMILY_ALPHA / 7, max(c.n_parameters, 1)))
+            if c.delta_chi2 <= (point if self.all_gains else c.threshold):
+                continue
+            f.nrmse[:] = self._heldout(f)
+            c.nrmse_per_observation = f.nrmse
+            c.heldout_nrmse = _mean(f.nrmse)
+            g = 1.0 - c.heldout_nrmse / _mean(current.nrmse)
+            c.gain = float(g) if math.isfinite(g) else -math.inf
+            c.significant = bool(c.delta_chi2 > c.threshold and c.gain > calib.min_gain)
+            c.evidence = self._evidence_text(h, c, self._energies[id(c)])
+            self._log(f"  {c.cause}: held-out gain {c.gain:+.3f}")
+            if c.significant and not self.all_gains:
+                break
+
+    def _heldout(self, fit: _Fit) -> FloatArray:
+        """Held-out NRMSE per observation (NaN where not held out); stores the predictions
+        under ``fit.key``."""
+        oe, obs, orbits = self._oe, self._obs, self._orbits
+        out = np.full(len(obs), np.nan)
+        sol = fit.sol
+        if self.design_ == "tail":
+            out[0] = self._predict(0, sol, sol.phases[0], fit.key)
+            return out
+        n = len(obs)
+        for group in self.folds_:
+            keep = [k for k in range(n) if k not in group]
+            sub = oe.subset(keep)
+            start = dataclasses.replace(sol, phases=tuple(sol.phases[k] for k in keep))
+            refit, _ = sub.refine(start, fit.build, fit.params, max_nfev=self.fold_nfev)
+            for j in group:
+                prior = obs[j].phase_prior
+                out[j] = self._predict(j, refit, None if prior is None else prior[0],
+                                       fit.key, Y=orbits[j].Y)
+        return out
+
+    def _predict(self, j: int, sol: Solution, phase: float | None, key: str,
+                 Y: NDArray[np.complex128] | None = None) -> float:
+        """Held-out NRMSE of ``sol``'s steady orbit at observation ``j``."""
+        oe, held = self._oe, self._held[j]
+        m0 = oe.model(j, sol.spec, sol.coef)
+        y0, v0 = steady_output(oe, j, m0, max_settle=self.max_settle_periods)
+        if not np.all(np.isfinite(y0)):
+            held.simulated[key] = np.full(held.tau.size, np.nan)
+            held.simulated_rate[key] = np.full(held.tau.size, np.nan)
             return math.inf
+        if phase is None:
+            assert Y is not None
+            phase = phase_for(y0, Y, None)
+        y = sample_orbit(y0, m0.omega, held.tau, phase)
+        held.simulated[key] = y
+        held.simulated_rate[key] = sample_orbit(v0, m0.omega, held.tau, phase)
+        held.phase[key] = float(phase)
         return float(nrmse(y, held.reference))
 
-    def _steady_prediction(self, model: DiagnosisModel, held: HeldOut
-                           ) -> tuple[FloatArray | None, FloatArray | None]:
-        """The model's periodic orbit (shooting, 2048 RK4 steps per period) at the held-out
-        times, if it converged and is stable; (None, None) otherwise."""
-        oe = OutputError(self._hb, self.calibrated_.scales)
-        s0, a0 = oe._start(model)
-        mult: list[complex] = []
-        x, v, ok = periodic_orbit(model, s0, a0, n_out=2048, multipliers=mult)
-        if not ok or not mult or max(abs(m) for m in mult) >= 1.0:
-            return None, None
-        grid = np.linspace(0.0, 2 * np.pi, x.size + 1)
-        theta = np.mod(model.omega * held.tau, 2 * np.pi)
-        y = model.measured(x)
-        out = []
-        for u in (y, v):
-            spline = CubicSpline(grid, np.append(u, u[0]), bc_type="periodic")
-            out.append(spline(theta))
-        return out[0], out[1]
+    def _finish(self, base: _Fit, final: _Fit, rep: int, obs: list[Observation],
+                orbits: list[PeriodicOrbit], held: list[HeldOut],
+                tested: dict[str, dict[str, Any]]) -> None:
+        oe = self._oe
+        named = bool(self.causes_)
+        self.observations_ = []
+        for j, o in enumerate(obs):
+            b = oe.model(j, base.sol.spec, base.sol.coef, base.sol.phases[j])
+            e = oe.model(j, final.sol.spec, final.sol.coef, final.sol.phases[j])
+            held[j].simulated["extended"] = held[j].simulated.get(
+                final.key, held[j].simulated.get("none", np.full(held[j].tau.size, np.nan)))
+            self.observations_.append(ObservationResult(
+                index=o.index, kind=o.kind, gap_m=o.gap_m, orbit=orbits[j], heldout=held[j],
+                baseline=b, extended=e, baseline_nrmse=float(base.nrmse[j]),
+                extended_nrmse=float(final.nrmse[j])))
+        r = self.observations_[rep]
+        self.orbit_, self.heldout_, self.calibrated_ = r.orbit, r.heldout, obs[rep].cal
+        self.heldout_start_ = (self._span(obs[0], True)[1] if self.design_ == "tail" else 0)
+        self.baseline_ = r.baseline
+        self.extended_ = r.extended
+        self.baseline_nrmse_ = _mean(base.nrmse)
+        self.extended_nrmse_ = _mean(final.nrmse)
+        self.gain_ = (1.0 - self.extended_nrmse_ / self.baseline_nrmse_
+                      if named and self.baseline_nrmse_ > 0 else 0.0)
+        ext_key = final.key if named else "none"
+        self.spectral_error_ = {
+            "baseline": self._spectral_error(r.heldout.simulated["none"], r.heldout),
+            "extended": self._spectral_error(r.heldout.simulated[ext_key], r.heldout)}
+        self.energy_ = {"measured": self._energy_measured(), "baseline": self._energy(
+            self.baseline_), "extended": self._energy(self.extended_)}
+        cg = tested.get("contact_geometry", {})
+        self.exponent_ = cg.get("exponent")
+        iv = cg.get("exponent_interval")
+        self.exponent_interval_ = None if iv is None else (float(iv[0]), float(iv[1]))
+        self.exponent_bounded_ = cg.get("bounded")
 
     def _spectral_error(self, y_sim: FloatArray, held: HeldOut) -> float:
         """``||Y_sim - Y_meas|| / ||Y_meas||`` over harmonics 1..n_h of the held-out span."""
         if not np.all(np.isfinite(y_sim)):
             return math.inf
-        n_h = self.orbit_.n_h
-        a = fit_harmonics(held.tau, y_sim, self.calibrated_.omega, n_harmonics=n_h)
-        b = fit_harmonics(held.tau, held.measured, self.calibrated_.omega, n_harmonics=n_h)
+        n_h = min(self.orbit_.n_h, max(held.tau.size // 4 - 1, 1))
+        om = self.calibrated_.omega
+        a = fit_harmonics(held.tau, y_sim, om, n_harmonics=n_h)
+        b = fit_harmonics(held.tau, held.measured, om, n_harmonics=n_h)
         ya, yb = a.complex_amplitudes[1:], b.complex_amplitudes[1:]
         return float(np.linalg.norm(ya - yb) / max(np.linalg.norm(yb), 1e-300))
 
     def _energy(self, model: DiagnosisModel) -> float:
         """Energy the model's force takes from the tip per cycle on the measured orbit."""
-        x, v, _ = self.orbit_.true_orbit(model.spec)
+        orbit = self._orbits[self._rep]
+        x, v, _ = orbit.true_orbit(model.spec)
         f = model.orbit_force(x, v)
         # -oint F dz = -int F z' dtau = int F x' dtau over one period
         return float(np.mean(f * v) * 2 * np.pi / model.omega)
@@ -471,18 +747,24 @@ class Diagnoser:
     def _energy_measured(self) -> float:
         """Drive input minus lever damping per cycle (calibrated ``F_c``, ``D = 1/Q``).
 
-        The drive's phase is not recorded; the extended model's fitted phase is used (the
-        model that explains the data; a conservative baseline's phase is biased towards no
-        loss: measured 6 eV against a true 35 eV on an adhesion-hysteresis trace, where the
-        extension's phase gives the right scale).
+        The drive's phase is the extended model's fitted one at the representative
+        observation (a conservative baseline's phase is biased towards no loss: measured
+        6 eV against a true 35 eV on an adhesion-hysteresis trace) or the recorded one.
         """
         o = self.orbit_
         b = self.extended_
-        fc = self.calibrated_.drive_amplitude or float(b.coef[2])
+        fc = o.drive_amplitude or float(b.coef[2])
         tau = o.theta / o.omega
         drive = fc * np.cos(o.omega * tau - b.spec.drive_phase)
         per = 2 * np.pi / o.omega
         return float(np.mean(drive * o.ydot - o.ydot**2 / o.quality_factor) * per)
+
+
+def _mean(a: FloatArray) -> float:
+    """Mean over the observations held out (NaN: not held out; inf: no prediction)."""
+    a = np.asarray(a, float)
+    a = a[~np.isnan(a)]
+    return float(np.mean(a)) if a.size else math.nan
 
 
 def name_cause(delta_chi2: list[float], gains: list[float], thresholds: list[float],

@@ -1,10 +1,12 @@
-"""Fit a model structure: grid over its nonlinear parameters, then joint refinement.
+"""Fit a model structure jointly over the observations: grid, then joint refinement.
 
-The nonlinear vector is ``(a0, phi, *extension parameters)``; every evaluation solves the
-linear sub-problem (:meth:`HarmonicBalance.solve`, variable projection). Stage 1 evaluates the
-extension's grid at the baseline's ``a0`` and ``phi``; stage 2 refines the best grid points
-jointly with ``a0`` and ``phi`` by bounded trust-region least squares on the whitened
-residual.
+The nonlinear vector is ``(a0, *extension parameters)`` shared by every observation plus one
+drive phase per observation; every evaluation solves the linear sub-problem
+(:meth:`JointBalance.solve`, variable projection). Stage 1 evaluates the extension's grid at
+the base model's ``a0`` and phases; stage 2 refines the best grid points jointly with ``a0``
+and the phases by bounded trust-region least squares on the whitened residual. The
+output-error stage (:func:`refine_output_error`) then fits each candidate's own periodic
+orbits, with the phases projected out in closed form.
 """
 
 from __future__ import annotations
@@ -16,12 +18,17 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
-from .balance import HarmonicBalance, Solution
+from .balance import Solution
 from .hypotheses.base import AbstractHypothesis, Context, Parameter
+from .joint import JointBalance
 from .output_error import OutputError
 from .spec import ModelSpec
 
-__all__ = ["fit_baseline", "fit_extension", "structure", "refine_output_error"]
+__all__ = ["fit_baseline", "fit_extension", "structure", "refine_balance", "refine_output_error",
+           "Build"]
+
+#: ``build(values) -> spec`` for the nonlinear values ``(a0, *extension)``
+Build = Callable[[Sequence[float]], ModelSpec]
 
 
 def _to_u(p: Parameter, v: float) -> float:
@@ -32,131 +39,145 @@ def _from_u(p: Parameter, u: float) -> float:
     return math.exp(u) if p.log else u
 
 
-def _refine(hb: HarmonicBalance, build, params: Sequence[Parameter], start: Sequence[float],
-            max_nfev: int) -> Solution:
-    """Bounded least squares over ``params`` (values) from ``start``; ``build(values) -> spec``."""
-    lo = np.array([_to_u(p, p.low) for p in params])
-    hi = np.array([_to_u(p, p.high) for p in params])
-    u0 = np.clip([_to_u(p, v) for p, v in zip(params, start, strict=True)], lo, hi)
+def refine_balance(jb: JointBalance, build: Build, params: Sequence[Parameter],
+                   start: Sequence[float], phases: Sequence[float], phase_width: float | None,
+                   max_nfev: int, *, project: int = 2) -> Solution:
+    """Bounded least squares over ``params`` from ``start``; the phases are free within
+    ``phase_width`` of ``phases``, or (``phase_width`` None) projected out
+    (:meth:`JointBalance.solve` with ``project``) starting from ``phases``."""
+    free = phase_width is not None
+    ph0 = list(phases)
+    n_ph = len(ph0) if free else 0
+    w = float(phase_width) if free else 0.0
+    lo = np.array([_to_u(p, p.low) for p in params] + [ph - w for ph in ph0[:n_ph]])
+    hi = np.array([_to_u(p, p.high) for p in params] + [ph + w for ph in ph0[:n_ph]])
+    u0 = np.array([_to_u(p, v) for p, v in zip(params, start, strict=True)] + ph0[:n_ph])
     u0 = np.minimum(np.maximum(u0, lo + 1e-9 * (hi - lo)), hi - 1e-9 * (hi - lo))
+    k = len(params)
     best: dict[str, Solution] = {}
 
     def fun(u: np.ndarray) -> np.ndarray:
-        vals = tuple(_from_u(p, float(x)) for p, x in zip(params, u, strict=True))
-        sol = hb.solve(build(vals), vals)
+        vals = tuple(_from_u(p, float(x)) for p, x in zip(params, u[:k], strict=True))
+        sol = (jb.solve(build(vals), u[k:], vals) if free else
+               jb.solve(build(vals), ph0, vals, project=project))
         if "s" not in best or sol.chi2 < best["s"].chi2:
             best["s"] = sol
         return sol.residual
 
-    try:
-        least_squares(fun, u0, bounds=(lo, hi), method="trf", x_scale="jac",
-                      diff_step=1e-3, max_nfev=max_nfev)
-    except (ValueError, np.linalg.LinAlgError):  # a degenerate start: keep what was seen
-        if "s" not in best:
-            fun(u0)
+    fun(u0)
+    if u0.size:
+        try:
+            least_squares(fun, u0, bounds=(lo, hi), method="trf", x_scale="jac",
+                          diff_step=1e-3, max_nfev=max_nfev)
+        except np.linalg.LinAlgError:  # a degenerate start: keep the best point seen
+            pass
     return best["s"]
 
 
-def fit_baseline(hb: HarmonicBalance, ctx: Context, *, n_a0: int = 10, n_phase: int = 16,
+def fit_baseline(jb: JointBalance, ctx: Context, *, n_a0: int = 10,
                  max_nfev: int = 200) -> Solution:
-    """The baseline (1 mode, VdW--DMT sphere): grid over ``a0`` x drive phase, then refine.
+    """The baseline (1 mode, VdW--DMT sphere): grid over ``a0``, then refine with the phases.
 
-    ``a0`` is an intermolecular distance: searched from 0.1 to 3 nm (and above the orbit's
-    lowest gap, so the orbit can stay out of contact).
+    ``a0`` is an intermolecular distance: searched from 0.1 to 3 nm. At each grid point the
+    phases come from the relaxed problem (:meth:`JointBalance.initial_phases`).
     """
     lo_a = max(0.1e-9 / ctx.length_m, 1e-4)
     hi_a = max(3e-9 / ctx.length_m, 2 * lo_a)
-    a0_grid = np.geomspace(lo_a, hi_a, n_a0)
-    phases = np.linspace(-math.pi, math.pi, n_phase, endpoint=False)
     scored = []
-    for a0 in a0_grid:
-        for ph in phases:
-            s = hb.solve(ModelSpec(a0=float(a0), drive_phase=float(ph)), (float(a0), float(ph)))
-            scored.append((s.chi2, float(a0), float(ph)))
-    scored.sort()
-    params = [Parameter("a0", lo_a, hi_a, (), log=True),
-              Parameter("drive_phase", -4 * math.pi, 4 * math.pi, ())]
+    for a0 in np.geomspace(lo_a, hi_a, n_a0):
+        spec = ModelSpec(a0=float(a0))
+        ph = jb.initial_phases(spec)
+        s = jb.solve(spec, ph, (float(a0),))
+        scored.append((s.chi2, float(a0), ph))
+    scored.sort(key=lambda t: t[0])
+    params = [Parameter("a0", lo_a, hi_a, (), log=True)]
     best = None
     for _, a0, ph in scored[:3]:
-        sol = _refine(hb, lambda v: ModelSpec(a0=v[0], drive_phase=v[1]), params, (a0, ph),
-                      max_nfev)
+        sol = refine_balance(jb, lambda v: ModelSpec(a0=v[0]), params, (a0,), ph, None,
+                             max_nfev, project=3)
         if best is None or sol.chi2 < best.chi2:
             best = sol
     assert best is not None
     return best
 
 
-def fit_extension(hb: HarmonicBalance, base: Solution, hyp: AbstractHypothesis, ctx: Context,
-                  *, max_nfev: int = 200) -> list[Solution]:
-    """Fit ``hyp``'s extension of the baseline ``base`` on the harmonic balance.
+def fit_extension(jb: JointBalance, base: Solution, hyp: AbstractHypothesis, ctx: Context,
+                  *, max_nfev: int = 200, n_starts: int | None = None) -> list[Solution]:
+    """Fit ``hyp``'s extension of ``base`` (equation error, all observations at once).
 
-    Returns up to ``hyp.n_starts`` solutions, best first: the best grid points, each refined
-    jointly with ``a0`` and the drive phase (distinct starts for the output-error stage, which
-    the equation error cannot rank reliably for forces that jump), and, if the search ended
-    above the baseline, the nested point (the extension switched off) as well.
+    Returns up to ``n_starts`` (default ``hyp.n_starts``) solutions, best first: the best grid
+    points, each refined jointly with ``a0`` (the phases projected out), and, if the search
+    ended above the base model, the nested point (the extension switched off).
     """
     params = hyp.parameters(ctx)
     spec0 = base.spec
     grid = list(itertools.product(*[p.grid for p in params]))
     scored = []
     for vals in grid:
-        s = hb.solve(hyp.extend(spec0, vals), (spec0.a0, spec0.drive_phase, *vals))
-        scored.append((s.chi2, vals, s))
+        s = jb.solve(hyp.extend(spec0, vals), base.phases, (spec0.a0, *vals), project=1)
+        scored.append((s.chi2, vals))
     scored.sort(key=lambda t: t[0])
     build, allp = structure(hyp, spec0, ctx)
-    out = []
-    for _, vals, _ in scored[:hyp.n_starts]:
-        out.append(_refine(hb, build, allp, (spec0.a0, spec0.drive_phase, *vals), max_nfev))
+    out = [refine_balance(jb, build, allp, (spec0.a0, *vals), base.phases, None, max_nfev)
+           for _, vals in scored[:n_starts or hyp.n_starts]]
     out.sort(key=lambda s: s.chi2)
-    # every extension nests the baseline; a search that ends above it has failed to find
-    # that point, so the nested limit (the baseline with the extension switched off) joins
     if out[0].chi2 > base.chi2:
         nv = hyp.nested_values(params)
-        out.append(hb.solve(hyp.extend(spec0, nv), (spec0.a0, spec0.drive_phase, *nv)))
+        out.append(jb.solve(hyp.extend(spec0, nv), base.phases, (spec0.a0, *nv)))
     return out
 
 
 def structure(hyp: AbstractHypothesis | None, spec0: ModelSpec, ctx: Context
-              ) -> tuple[Callable[[Sequence[float]], ModelSpec], list[Parameter]]:
-    """``build(values) -> spec`` and the parameters ``(a0, phi, *extension)`` around ``spec0``.
+              ) -> tuple[Build, list[Parameter]]:
+    """``build(values) -> spec`` and the parameters ``(a0, *extension)`` around ``spec0``.
 
-    ``a0`` may move by a factor 3 and the drive phase by 0.5 rad from the baseline's values.
+    ``a0`` may move by a factor 3 from ``spec0``'s; the extensions already in ``spec0`` keep
+    their nonlinear parameters (their linear coefficients are refitted).
     """
-    params = [Parameter("a0", spec0.a0 / 3.0, spec0.a0 * 3.0, (), log=True),
-              Parameter("drive_phase", spec0.drive_phase - 0.5, spec0.drive_phase + 0.5, ())]
+    params = [Parameter("a0", spec0.a0 / 3.0, spec0.a0 * 3.0, (), log=True)]
     if hyp is not None:
         params += hyp.parameters(ctx)
 
     def build(v: Sequence[float]) -> ModelSpec:
-        s = spec0.replace(a0=float(v[0]), drive_phase=float(v[1]))
-        return s if hyp is None else hyp.extend(s, v[2:])
+        s = spec0.replace(a0=float(v[0]))
+        return s if hyp is None else hyp.extend(s, v[1:])
 
     return build, params
 
 
 def refine_output_error(oe: OutputError, starts: Sequence[Solution],
                         hyp: AbstractHypothesis | None, base: Solution, ctx: Context, *,
-                        max_nfev: int = 25) -> tuple[Solution, bool]:
+                        max_nfev: int = 25, nested: str = "always"
+                        ) -> tuple[Solution, bool, Build, list[Parameter]]:
     """Output-error refinement from each start; the best refined solution.
 
-    ``hyp`` None refines the baseline. ``base`` is the frame of the bounds: the baseline's
-    equation-error solution when refining it, the refined baseline for an extension; in that
-    case a start at the nested point (the refined baseline with the extension switched off)
-    is added, so the extension, which contains the baseline, cannot end worse than it.
+    ``hyp`` None refines ``base`` itself. For an extension the nested point (the refined
+    base with the extension switched off) is a further start, so the extension, which
+    contains the base, cannot end worse than it: refined always (``nested="always"``), or
+    only when the other starts end no better than the base (``"fallback"``: saves a
+    refinement per cause on joint fits). Returns the solution, whether every orbit
+    converged, and the structure (``build``, parameters) it was refined in.
     """
     build, params = structure(hyp, base.spec, ctx)
     starts = list(starts)
+    fallback = None
     if hyp is not None:
-        nv = hyp.nested_values(params[2:])
-        vals = (*base.values[:2], *nv)
+        nv = hyp.nested_values(params[1:])
+        vals = (base.values[0], *nv)
         spec = build(vals)
-        coef = np.concatenate([base.coef, np.zeros(spec.n_force - base.spec.n_force)])
-        starts.append(Solution(spec=spec, coef=coef, residual=base.residual, chi2=base.chi2,
-                               values=vals))
+        fallback = Solution(spec=spec, coef=spec.embed(base.spec, base.coef),
+                            residual=base.residual, chi2=base.chi2, values=vals,
+                            phases=base.phases)
+        if nested == "always":
+            starts.append(fallback)
     best: tuple[Solution, bool] | None = None
     for start in starts:
         out, ok = oe.refine(start, build, params, max_nfev=max_nfev)
         if best is None or out.chi2 < best[0].chi2:
             best = (out, ok)
     assert best is not None
-    return best
+    if fallback is not None and nested == "fallback" and best[0].chi2 >= base.chi2 - 1e-9:
+        out, ok = oe.refine(fallback, build, params, max_nfev=max_nfev)
+        if out.chi2 < best[0].chi2:
+            best = (out, ok)
+    return best[0], best[1], build, params

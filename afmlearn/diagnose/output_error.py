@@ -8,6 +8,13 @@ by Newton shooting on the one-period map of the compiled RK4 kernel, and its har
 compared with the measured ones in units of their noise (plus the calibration priors). The
 chi-square of this residual is the likelihood of "measured = model orbit + white noise", so the
 evidence and the held-out simulation judge the same thing.
+
+Joint fits: every observation's orbit is shot with its own gap and drive phase 0; its drive
+phase is then projected out in closed form (:func:`align_phase`): with drive
+``B cos(Omega tau - phi)`` the steady orbit is the phase-0 orbit delayed by ``phi / Omega``,
+so its harmonics are ``X_n e^{-i n phi}`` and the best ``phi`` (with the recorded phase's
+prior, if any) is a one-dimensional trigonometric problem. The shared parameters are refined
+by least squares on the projected residual (variable projection).
 """
 
 from __future__ import annotations
@@ -22,12 +29,13 @@ from scipy.optimize import least_squares
 from simulator import Scales
 
 from ._kernel import simulate_model
-from .balance import HarmonicBalance, Solution, harmonics, to_real
+from .balance import Solution, harmonics, to_real
 from .hypotheses.base import Parameter
+from .joint import JointBalance, PhasePrior, wrap
 from .model import DiagnosisModel
 from .spec import ModelSpec, neck_state
 
-__all__ = ["periodic_orbit", "OutputError"]
+__all__ = ["periodic_orbit", "OutputError", "align_phase", "settle_periods", "start_state"]
 
 FloatArray = NDArray[np.float64]
 
@@ -35,7 +43,8 @@ FloatArray = NDArray[np.float64]
 def periodic_orbit(model: DiagnosisModel, state0: FloatArray, attached0: bool, *,
                    n_out: int = 1024, max_iter: int = 12, tol: float = 1e-10,
                    settle_periods: int = 0, multipliers: list | None = None,
-                   jacobian: FloatArray | None = None) -> tuple[FloatArray, FloatArray, bool]:
+                   jacobian: FloatArray | None = None, state_out: list | None = None
+                   ) -> tuple[FloatArray, FloatArray, bool]:
     """The model's periodic orbit through (near) ``state0`` at ``tau = 0``.
 
     Newton shooting on the one-period map ``P(s) - s = 0`` (finite-difference monodromy),
@@ -47,7 +56,8 @@ def periodic_orbit(model: DiagnosisModel, state0: FloatArray, attached0: bool, *
     Returns the true deflection and rate at ``n_out`` equally spaced phases
     ``theta = 2 pi k / n_out`` and whether shooting converged. If ``multipliers`` is a list,
     the Floquet multipliers of the converged orbit are appended to it (all of modulus < 1: a
-    stable orbit).
+    stable orbit). If ``state_out`` is a list, the orbit's state ``[q1, q1', q2, q2']`` and
+    neck state at ``tau = 0`` are appended to it.
     """
     T = 2 * math.pi / model.omega
     args = model.kernel_args()
@@ -74,6 +84,8 @@ def periodic_orbit(model: DiagnosisModel, state0: FloatArray, attached0: bool, *
         full = np.zeros(4)
         full[:dim] = x0
         _, full, att = simulate_model(full, att, 0.0, T, int(settle_periods), n_out, *args)
+    if state_out is not None:
+        state_out.append((full.copy(), att))
     out, _, _ = simulate_model(full, att, 0.0, T / n_out, n_out, 1, *args)
     if multipliers is not None and ok:
         px, _ = period_map(x)
@@ -125,136 +137,216 @@ def _monodromy(period_map, x: FloatArray, px: FloatArray, scale: float) -> Float
     return J
 
 
+def align_phase(X0: NDArray[np.complex128], Y: NDArray[np.complex128], sigma: float,
+                prior: PhasePrior | None = None) -> float:
+    """Drive phase ``phi`` minimising ``sum_n |X0_n e^{-i n phi} - Y_n|^2 / sigma^2`` (n >= 1)
+    plus the prior ``((phi - mean) / sd)^2``.
+
+    ``X0`` are the harmonics of the phase-0 orbit, ``Y`` the measured ones (same length),
+    ``sigma`` the noise of one real harmonic coefficient. Grid of 1024 phases (one FFT), then
+    Newton steps.
+    """
+    n = np.arange(1, min(X0.size, Y.size))
+    a = np.conj(Y[n]) * X0[n]
+    m = 1024
+    full = np.zeros(m, complex)
+    full[n] = a
+    g = np.real(np.fft.fft(full))             # g_k = Re sum_n a_n e^{-i n 2 pi k / m}
+    phis = 2 * np.pi * np.arange(m) / m
+    f = -2.0 * g / sigma**2
+    if prior is not None:
+        f = f + (wrap(phis - prior[0]) / prior[1]) ** 2
+    phi = float(phis[int(np.argmin(f))])
+    for _ in range(6):
+        e = a * np.exp(-1j * n * phi)
+        d1 = -2.0 * float(np.real(np.sum(-1j * n * e))) / sigma**2
+        d2 = -2.0 * float(np.real(np.sum(-(n**2) * e))) / sigma**2
+        if prior is not None:
+            d1 += 2.0 * wrap(phi - prior[0]) / prior[1] ** 2
+            d2 += 2.0 / prior[1] ** 2
+        if d2 <= 0:
+            break
+        step = max(min(d1 / d2, 0.05), -0.05)
+        phi -= step
+        if abs(step) < 1e-12:
+            break
+    return float(wrap(phi))
+
+
+def settle_periods(model: DiagnosisModel, *, cap: int = 3000) -> int:
+    """Drive periods for the slowest mode's transient to fall by e^-9 (~1e-4)."""
+    d = [float(model.coef[1])]
+    if model.spec.mode2 is not None:
+        ratio, q2, _ = model.spec.mode2
+        d.append(ratio / q2)
+    rate = max(min(d), 1e-6) / 2.0          # amplitude decay rate per unit tau
+    return int(min(math.ceil(9.0 / rate * model.omega / (2 * math.pi)), cap))
+
+
+def start_state(model: DiagnosisModel, orbit, phase: float) -> tuple[FloatArray, bool]:
+    """State ``[q1, q1', q2, q2']`` and neck state at ``tau = 0`` of the phase-0 model, taken
+    from the measured orbit ``phase`` radians into its period (where the phase-0 orbit
+    starts when the measured one has drive phase ``phase``)."""
+    at = DiagnosisModel(spec=model.spec.replace(drive_phase=float(phase)), coef=model.coef,
+                        omega=model.omega, gap=model.gap, scales=model.scales)
+    x, v, _ = orbit.true_orbit(model.spec)
+    q2, q2d = at.mode2_orbit(orbit)
+    k = int(round(float(np.mod(phase, 2 * np.pi)) / (2 * np.pi) * orbit.grid)) % orbit.grid
+    att = neck_state(model.gap - x, model.spec.a0, model.spec.neck_length)
+    return np.array([x[k] - q2[k], v[k] - q2d[k], q2[k], q2d[k]]), bool(att[k])
+
+
 class OutputError:
-    """Output-error least squares of one model structure against the measured orbit.
+    """Output-error least squares of one model structure against the measured orbits.
 
     Parameters
     ----------
-    hb : HarmonicBalance
-        Gives the measured orbit, its noise and the calibration priors.
+    jb : JointBalance
+        Gives the measured orbits, their noise, the calibration and phase priors.
     scales : simulator.Scales
         SI scales of the models built.
     n_out : int
         RK4 steps (and output samples) per period of the shooting.
     """
 
-    def __init__(self, hb: HarmonicBalance, scales: Scales, *, n_out: int = 256) -> None:
-        self.hb = hb
+    def __init__(self, jb: JointBalance, scales: Scales, *, n_out: int = 256) -> None:
+        self.jb = jb
         self.scales = scales
         self.n_out = int(n_out)
-        o = hb.orbit
-        self._y_real = to_real(o.Y)
-        self._sigma = o.sigma_rows
+        self._orbits = [hb.orbit for hb in jb.balances]
+        self._y_real = [to_real(o.Y) for o in self._orbits]
+        self._sigma = [o.sigma_rows for o in self._orbits]
         self._warm: dict[tuple, tuple[FloatArray, bool]] = {}
         self._jac: dict[tuple, FloatArray] = {}
+        self._phases = [0.0] * jb.n_obs
         #: settle runs (instead of shooting) still allowed in the current refinement
         self._settle_budget = 0
 
-    @staticmethod
-    def _key(model: DiagnosisModel) -> tuple:
-        s = model.spec
-        return (s.mode2 is not None, s.neck_length is not None, s.detector is not None)
+    def subset(self, indices: Sequence[int]) -> OutputError:
+        """The output error of some observations (held-out folds), warm starts kept."""
+        oe = OutputError(self.jb.subset(indices), self.scales, n_out=self.n_out)
+        for new, old in enumerate(indices):
+            for (i, key), v in self._warm.items():
+                if i == old:
+                    oe._warm[(new, key)] = v
+        return oe
 
-    def _start(self, model: DiagnosisModel) -> tuple[FloatArray, bool]:
-        """Shooting start: the last converged orbit of the same structure (the refinement moves
-        in small steps), else the measured orbit's state at ``theta = 0``."""
-        key = self._key(model)
+    @staticmethod
+    def _key(spec: ModelSpec) -> tuple:
+        return (spec.mode2 is not None, spec.neck_length is not None, spec.detector is not None)
+
+    def model(self, i: int, spec: ModelSpec, coef: FloatArray, phase: float = 0.0
+              ) -> DiagnosisModel:
+        """The model at observation ``i`` (its gap and drive frequency) with drive ``phase``."""
+        o = self._orbits[i]
+        return DiagnosisModel(spec=spec.replace(drive_phase=float(phase)),
+                              coef=np.asarray(coef, float), omega=o.omega, gap=o.gap,
+                              scales=self.scales)
+
+    def start(self, i: int, model0: DiagnosisModel) -> tuple[FloatArray, bool]:
+        """Shooting start for the phase-0 model at observation ``i``: the last converged
+        orbit of the same structure, else the measured orbit at the current phase."""
+        key = (i, self._key(model0.spec))
         if key in self._warm:
             return self._warm[key]
-        o = self.hb.orbit
-        x, v, _ = o.true_orbit(model.spec)
-        q2, q2d = model.mode2_orbit(o)
-        att = neck_state(model.gap - x, model.spec.a0, model.spec.neck_length)
-        return np.array([x[0] - q2[0], v[0] - q2d[0], q2[0], q2d[0]]), bool(att[0])
+        return start_state(model0, self._orbits[i], self._phases[i])
 
-    @staticmethod
-    def settle_periods(model: DiagnosisModel, *, cap: int = 3000) -> int:
-        """Drive periods for the slowest mode's transient to fall by e^-9 (~1e-4)."""
-        d = [float(model.coef[1])]
-        if model.spec.mode2 is not None:
-            ratio, q2, _ = model.spec.mode2
-            d.append(ratio / q2)
-        rate = max(min(d), 1e-6) / 2.0          # amplitude decay rate per unit tau
-        return int(min(math.ceil(9.0 / rate * model.omega / (2 * math.pi)), cap))
-
-    def residual(self, model: DiagnosisModel) -> tuple[FloatArray, bool]:
-        """Whitened orbit residual (harmonics) followed by the calibration-prior rows."""
-        o = self.hb.orbit
-        s0, a0 = self._start(model)
-        key = self._key(model)
-        dim = 4 if model.spec.mode2 is not None else 2
-        jac = self._jac.setdefault(key, np.full((dim, dim), np.nan))
-        settle = self.settle_periods(model) if self._settle_budget > 0 else 0
-        x, v, ok = periodic_orbit(model, s0, a0, n_out=self.n_out, max_iter=20, jacobian=jac,
-                                  settle_periods=settle)
-        if not ok:
-            if not settle:   # no orbit at all: a point the refinement must step back from
-                return np.full(self._sigma.size + self.hb.prior_residual(model.coef).size,
-                               1e3), False
-            self._settle_budget -= 1
+    def orbit(self, i: int, model0: DiagnosisModel, *, n_out: int | None = None,
+              settle: int = 0, multipliers: list | None = None
+              ) -> tuple[FloatArray, FloatArray, bool]:
+        """Periodic orbit (true deflection, rate; ``n_out`` phases) of the phase-0 model."""
+        s0, a0 = self.start(i, model0)
+        dim = 4 if model0.spec.mode2 is not None else 2
+        jac = self._jac.setdefault((i, self._key(model0.spec)), np.full((dim, dim), np.nan))
+        state: list = []
+        x, v, ok = periodic_orbit(model0, s0, a0, n_out=n_out or self.n_out, max_iter=20,
+                                  jacobian=jac, settle_periods=settle, multipliers=multipliers,
+                                  state_out=state)
         if ok:
-            q2, q2d = (np.zeros(1), np.zeros(1)) if model.spec.mode2 is None else \
-                model.mode2_orbit(o)
-            self._warm[key] = (np.array([x[0] - q2[0], v[0] - q2d[0], q2[0],
-                                                      q2d[0]]), a0)
-        y = model.measured(x)
-        if not np.all(np.isfinite(y)):
-            r = np.full(self._sigma.size, 1e6)
-        else:
-            r = (to_real(harmonics(y, o.n_h)) - self._y_real) / self._sigma
-        return np.concatenate([r, self.hb.prior_residual(model.coef)]), ok
+            self._warm[(i, self._key(model0.spec))] = state[0]
+        return x, v, ok
+
+    def residual(self, spec: ModelSpec, coef: FloatArray
+                 ) -> tuple[FloatArray, bool, list[float]]:
+        """Whitened orbit residuals of every observation (phases projected out), then the
+        calibration-prior and phase-prior rows; whether every orbit converged; the phases."""
+        parts = []
+        ok_all = True
+        phases = []
+        prior = self.jb.prior_residual(coef)
+        for i, o in enumerate(self._orbits):
+            m0 = self.model(i, spec, coef)
+            settle = settle_periods(m0) if self._settle_budget > 0 else 0
+            x, _, ok = self.orbit(i, m0, settle=settle)
+            if not ok:
+                ok_all = False
+                if not settle:   # no orbit at all: a point the refinement must step back from
+                    n_ph = sum(p is not None for p in self.jb.phase_priors)
+                    size = sum(s.size for s in self._sigma) + prior.size + n_ph
+                    return np.full(size, 1e3), False, list(self._phases)
+                self._settle_budget -= 1
+            y = m0.measured(x)
+            if not np.all(np.isfinite(y)):
+                parts.append(np.full(self._sigma[i].size, 1e6))
+                phases.append(self._phases[i])
+                continue
+            X0 = harmonics(y, o.n_h)
+            ph = align_phase(X0, o.Y, float(self._sigma[i][1]), self.jb.phase_priors[i])
+            n = np.arange(X0.size)
+            parts.append((to_real(X0 * np.exp(-1j * n * ph)) - self._y_real[i])
+                         / self._sigma[i])
+            phases.append(ph)
+        return (np.concatenate([*parts, prior, self.jb.phase_residual(phases)]), ok_all,
+                phases)
 
     def refine(self, sol: Solution, build: Callable[[Sequence[float]], ModelSpec],
                params: Sequence[Parameter], *, max_nfev: int = 25) -> tuple[Solution, bool]:
-        """Refine ``(K, D, B, c, *nonlinear values)`` from an equation-error solution.
+        """Refine ``(K, D, B, c, *nonlinear values)`` from ``sol`` (any stage).
 
         ``build(values) -> ModelSpec`` maps the nonlinear values (``params`` order; the
         solution's ``values`` are the start) to a spec. Returns the refined solution (chi2 =
-        output-error chi2) and whether its orbit converged.
+        output-error chi2, ``phases`` the projected ones) and whether its orbits converged.
         """
-        values = sol.values
+        if sol.phases:
+            self._phases = list(sol.phases)
         self._settle_budget = 3
-        hb = self.hb
         lin = np.asarray(sol.coef, float)
         n_lin = lin.size
-        lo_l, hi_l = hb.bounds(sol.spec)
+        lo_l, hi_l = self.jb.bounds(sol.spec)
         lo_n = np.array([_u(p, p.low) for p in params])
         hi_n = np.array([_u(p, p.high) for p in params])
-        u_n = np.clip([_u(p, v) for p, v in zip(params, values, strict=True)],
+        u_n = np.clip([_u(p, v) for p, v in zip(params, sol.values, strict=True)],
                       lo_n + 1e-9 * (hi_n - lo_n), hi_n - 1e-9 * (hi_n - lo_n))
         u_n = np.asarray(u_n, float).reshape(-1)
         lin0 = np.clip(lin, lo_l, hi_l)
         scale_l = np.maximum(np.abs(lin0), 1e-6 * max(float(np.max(np.abs(lin0))), 1e-9))
-        # linear coefficients pinned at a sign bound stay free to leave it
         x0 = np.concatenate([lin0 / scale_l, u_n])
         lo = np.concatenate([lo_l / scale_l, lo_n])
         hi = np.concatenate([hi_l / scale_l, hi_n])
         x0 = np.minimum(np.maximum(x0, lo), hi)
-        o = self.hb.orbit
-        omega, gap, scales = o.omega, o.gap, self.scales
-        best: dict[str, tuple[float, FloatArray, ModelSpec, bool, tuple[float, ...]]] = {}
+        best: dict[str, tuple] = {}
 
         def fun(x: FloatArray) -> FloatArray:
             vals = tuple(_from_u(p, float(v)) for p, v in zip(params, x[n_lin:], strict=True))
-            m = DiagnosisModel(spec=build(vals), coef=x[:n_lin] * scale_l, omega=omega,
-                               gap=gap, scales=scales)
-            r, ok = self.residual(m)
+            spec = build(vals)
+            coef = x[:n_lin] * scale_l
+            r, ok, phases = self.residual(spec, coef)
             c2 = float(r @ r)
             if "b" not in best or c2 < best["b"][0]:
-                best["b"] = (c2, m.coef.copy(), m.spec, ok, vals)
+                best["b"] = (c2, coef.copy(), spec, ok, vals, r, phases)
+                self._phases = list(phases)
             return r
 
         r0 = fun(x0)
-        if np.all(np.isfinite(r0)):
+        if np.all(r0 < 1e3):
             try:
                 least_squares(fun, x0, bounds=(lo, hi), method="trf", x_scale="jac",
                               diff_step=1e-4, max_nfev=max_nfev)
-            except (ValueError, np.linalg.LinAlgError):
+            except np.linalg.LinAlgError:   # a singular step: keep the best point seen
                 pass
-        c2, coef, spec, ok, vals = best["b"]
-        model_r, _ = self.residual(DiagnosisModel(spec=spec, coef=coef, omega=omega, gap=gap,
-                                                  scales=scales))
-        return Solution(spec=spec, coef=coef, residual=model_r, chi2=c2, values=vals), ok
+        c2, coef, spec, ok, vals, r, phases = best["b"]
+        return Solution(spec=spec, coef=coef, residual=r, chi2=c2, values=vals,
+                        phases=tuple(phases)), ok
 
 
 def _u(p: Parameter, v: float) -> float:

@@ -2,15 +2,20 @@
 
 :func:`diagnose_trace` is the one function behind ``scripts/diagnose.py``. It reads a
 trace-format-v1 file **without its /labels group** and never interprets the file name, fits a
-:class:`Diagnoser` and writes into ``out_dir`` (atomically: temporary sibling + rename):
+:class:`Diagnoser` to the file's experiment (a set-point series: every row; one steady record
+or one row of a sweep: an experiment of one) and writes into ``out_dir`` (atomically:
+temporary sibling + rename):
 
 ``report.json``
     design.md section 3 (``cause``, ``confidence``, ``baseline``, ``extended``, ``gain``,
-    ``candidates``, ``figures``) plus provenance, calibration, energies, warnings, runtime.
+    ``candidates``, ``causes``, ``figures``) plus the held-out NRMSE per observation
+    (``observations``), the held-out design, the contact exponent's interval, provenance,
+    calibration, energies, warnings, runtime.
 ``report.md``
     The same for people, with the figures side by side (baseline left, extended right).
 ``*.png``
-    :mod:`afmlearn.plots.diagnose`, unless ``figures=False``.
+    Drawn by the ``figures`` callable the caller passes (the script passes
+    ``afmlearn.plots.diagnose.plot_all``; this package never imports the plots).
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -27,35 +33,24 @@ from afmlearn.io._atomic import atomic_path
 from afmlearn.preprocess import checked_row
 
 from .diagnoser import Diagnoser
+from .hypotheses import default_hypotheses
 from .model import DiagnosisModel
 
-__all__ = ["diagnose_trace", "report_record", "REPORT_FORMAT"]
+__all__ = ["diagnose_trace", "report_record", "REPORT_FORMAT", "FigureWriter"]
 
 REPORT_FORMAT = "afmlearn-diagnosis-report"
 
-_CAUSE_TEXT = {
-    "none": "the baseline (one mode, VdW-DMT sphere contact) explains the recording within "
-            "its noise",
-    "higher_mode": "a higher flexural eigenmode takes part in the motion",
-    "viscoelastic": "the sample dissipates energy while indented, at a rate set by the "
-                    "indentation speed (visco-elastic contact)",
-    "long_range_damping": "energy is lost out of contact, by a damping that decays with the "
-                          "gap (squeeze film, hydration or capillary layer)",
-    "contact_geometry": "the force grows with indentation with an exponent other than the "
-                        "sphere's 1.5 (cone-like tip)",
-    "adhesion_hysteresis": "contact breaks later on retraction than it forms (a JKR-like "
-                           "neck): rate-independent loss at pull-off",
-    "electrostatic": "a long-range attraction decays slower than van der Waals "
-                     "(electrostatics: bias or trapped charge)",
-    "detector_nonlinearity": "the detector, not the cantilever, distorts the signal (an "
-                             "output map with quadratic and cubic terms)",
-}
+#: ``figures(diagnoser, out_dir) -> {name: path}``: draws the report's figures
+FigureWriter = Callable[[Diagnoser, Path], dict[str, Path]]
+
+_NONE_TEXT = ("the baseline (one mode, VdW-DMT sphere contact) explains the recording within "
+              "its noise")
 
 
 def diagnose_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
                    row: int | None = None, diagnoser: Diagnoser | None = None,
-                   figures: bool = True, qrnn: bool = True) -> dict[str, Any]:
-    """Diagnose one trace file (one row of a sweep) and write the report.
+                   figures: FigureWriter | None = None) -> dict[str, Any]:
+    """Diagnose one trace file (its experiment, or one row) and write the report.
 
     Parameters
     ----------
@@ -64,14 +59,13 @@ def diagnose_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]
     out_dir : str or os.PathLike
         Output folder (created if missing); existing report files are replaced.
     row : int, optional
-        Row of a sweep, in ``[0, n_points)``; required for sweeps, None otherwise.
+        Diagnose one row: required for a sweep (in ``[0, n_points)``); for a set-point
+        series it picks one set-point (default: all of them, fitted jointly).
     diagnoser : Diagnoser, optional
         Settings (fitted in place); default ``Diagnoser()``.
-    figures : bool
-        Also write the PNG figures.
-    qrnn : bool
-        Also score the trace with the shipped QRNN mode-coupling checkpoint (issue 4) and
-        report it as independent evidence for ``higher_mode`` (it does not change the cause).
+    figures : callable, optional
+        ``figures(diagnoser, out_dir) -> {name: path}`` draws the figures (e.g.
+        ``afmlearn.plots.diagnose.plot_all``); None: no figures.
 
     Returns
     -------
@@ -86,47 +80,32 @@ def diagnose_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]
     afmlearn.preprocess.InputError
         NaN / inf, < 20 samples per period, too short, clipped (a ValueError).
     ValueError
-        ``row`` missing for a sweep or out of range, a time-varying gap, bad settings.
+        ``row`` missing for a sweep or out of range, bad settings.
     """
     t0 = time.perf_counter()
     path = Path(path)
     out = Path(out_dir)
     trace = read_trace(path)                          # labels=False: /labels never opened
-    row = checked_row(trace, row)
+    if trace.is_sweep or not trace.has_rows:
+        row = checked_row(trace, row)
+    elif row is not None and (isinstance(row, bool) or not isinstance(row, int)
+                              or not 0 <= row < trace.n_points):
+        raise ValueError(f"row must be null (every set-point) or an integer in "
+                         f"[0, {trace.n_points}), got {row!r}")
     dg = diagnoser if diagnoser is not None else Diagnoser()
     if not isinstance(dg, Diagnoser):
         raise ValueError(f"diagnoser must be a Diagnoser, got {type(dg).__name__}")
+    if figures is not None and not callable(figures):
+        raise ValueError(f"figures must be None or a callable (diagnoser, out_dir) -> "
+                         f"dict, got {figures!r}")
     dg.fit(trace, row=row)
     out.mkdir(parents=True, exist_ok=True)
-    figs: dict[str, Path] = {}
-    if figures:
-        from afmlearn.plots.diagnose import plot_all
-        figs = plot_all(dg, out)
+    figs: dict[str, Path] = figures(dg, out) if figures is not None else {}
     rec = report_record(dg, input_path=path, row=row, figures=[p.name for p in figs.values()],
                         runtime_s=time.perf_counter() - t0)
-    if qrnn:
-        rec["qrnn_coupling"] = _qrnn_coupling(trace, row)
-        for c in rec["candidates"]:
-            q = rec["qrnn_coupling"]
-            if c["cause"] == "higher_mode" and "score" in q:
-                c["evidence"] += (f"; QRNN coupling score {q['score']:.2f} "
-                                  f"({'coupled' if q['flag'] else 'not coupled'})")
     write_json(out / "report.json", rec)
     _write_text(out / "report.md", report_markdown(rec, figs))
     return {**rec, "diagnoser": dg}
-
-
-def _qrnn_coupling(trace: Any, row: int | None) -> dict[str, Any]:
-    """Mode-coupling score of the shipped QRNN checkpoint for this trace (or the reason not)."""
-    try:
-        from afmlearn.qrnn.infer import load_module, predict_trace
-        module, run, used = load_module(None)
-        s = predict_trace(trace, module, run)["summary"]
-        t = s["traces"][0 if row is None else row]
-        return {"score": float(t["score"]), "flag": bool(t["flag"]),
-                "checkpoint": Path(used).name}
-    except (ImportError, ValueError, RuntimeError) as err:  # no torch, or out of its range
-        return {"unavailable": f"{type(err).__name__}: {err}"}
 
 
 def _model_record(m: DiagnosisModel, nrmse: float, spectral: float | None, energy: float,
@@ -146,10 +125,15 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
                   figures: list[str], runtime_s: float) -> dict[str, Any]:
     """The JSON-able report (design.md section 3 keys first)."""
     cal = dg.calibrated_
-    chosen = next((c for c in dg.candidates_ if c.cause == dg.cause_), None)
-    base_chi2 = (chosen.chi2 + chosen.delta_chi2) if chosen else (
-        dg.candidates_[0].chi2 + dg.candidates_[0].delta_chi2 if dg.candidates_ else None)
-    return jsonable({
+    hyps = {h.cause: h for h in (dg.hypotheses or default_hypotheses())}
+    base_chi2 = (dg.candidates_[0].chi2 + dg.candidates_[0].delta_chi2
+                 if dg.candidates_ else None)
+    final_chi2 = (next(c.chi2 for c in dg.causes_[-1].candidates
+                       if c.cause == dg.causes_[-1].cause) if dg.causes_ else base_chi2)
+    details = {c.cause: c.details for c in dg.candidates_}
+    qrnn = details.get("higher_mode", {}).get("qrnn_coupling")
+    length = cal.scales.length
+    rec: dict[str, Any] = {
         "cause": dg.cause_,
         "confidence": dg.confidence_,
         "baseline": _model_record(dg.baseline_, dg.baseline_nrmse_,
@@ -157,30 +141,46 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
                                   base_chi2),
         "extended": {**_model_record(dg.extended_, dg.extended_nrmse_,
                                      dg.spectral_error_["extended"], dg.energy_["extended"],
-                                     chosen.chi2 if chosen else base_chi2),
-                     "cause": dg.cause_},
+                                     final_chi2),
+                     "cause": dg.cause_, "causes": [s.cause for s in dg.causes_]},
         "gain": dg.gain_,
         "candidates": [{"cause": c.cause, "gain": c.gain, "score": c.score,
                         "evidence": c.evidence, "delta_chi2": c.delta_chi2,
                         "threshold": c.threshold, "significant": c.significant,
                         "heldout_nrmse": c.heldout_nrmse, "n_parameters": c.n_parameters,
-                        "equation": c.model.equation()} for c in dg.candidates_],
+                        "equation": c.model.equation(),
+                        "details": {k: v for k, v in c.details.items() if k != "text"}}
+                       for c in dg.candidates_],
+        "causes": [{"cause": s.cause, "gain": s.gain, "evidence": s.evidence,
+                    "delta_chi2": s.delta_chi2, "threshold": s.threshold,
+                    "confidence": s.confidence} for s in dg.causes_],
         "figures": figures,
         "format": REPORT_FORMAT,
         "afmlearn_version": afmlearn.__version__,
         "input": str(Path(input_path).resolve()),
         "row": row,
-        "explanation": _CAUSE_TEXT.get(dg.cause_, ""),
+        "explanation": (hyps[dg.cause_].explanation if dg.cause_ in hyps else _NONE_TEXT),
+        "observations": [
+            {"index": o.index, "kind": o.kind, "gap_m": o.gap_m,
+             "baseline_heldout_nrmse": o.baseline_nrmse,
+             "extended_heldout_nrmse": o.extended_nrmse,
+             "drive_phase_rad": -o.extended.spec.drive_phase,
+             "n_harmonics": o.orbit.n_h, "noise_rms_m": o.orbit.noise_rms * length}
+            for o in dg.observations_],
+        "heldout": {"design": dg.design_, "folds": dg.folds_,
+                    "heldout_fraction": dg.heldout_fraction if dg.design_ == "tail" else None},
+        "contact_exponent": (None if dg.exponent_interval_ is None else
+                             {"exponent": dg.exponent_, "interval_95": dg.exponent_interval_,
+                              "bounded": dg.exponent_bounded_}),
         "energy_per_cycle_j": {k: v * cal.scales.energy for k, v in dg.energy_.items()},
         "free_trace_harmonics": dg.free_harmonics_,
-        "noise": {"rms_m": dg.orbit_.noise_rms * cal.scales.length,
-                  "n_harmonics": dg.orbit_.n_h},
+        "noise": {"rms_m": dg.orbit_.noise_rms * length, "n_harmonics": dg.orbit_.n_h},
         "split": {"heldout_start": dg.heldout_start_, "n_samples": cal.n_samples,
                   "heldout_fraction": dg.heldout_fraction},
         "calibration": {"spring_constant_n_per_m": cal.scales.spring_constant,
                         "resonance_frequency_hz": cal.scales.resonance_frequency,
-                        "length_m": cal.scales.length, "quality_factor": cal.quality_factor,
-                        "omega": cal.omega, "drive_amplitude": cal.drive_amplitude,
+                        "length_m": length, "quality_factor": cal.quality_factor,
+                        "omega": cal.omega, "drive_amplitude": dg.orbit_.drive_amplitude,
                         "drive_source": cal.drive_source, "excitation": cal.excitation,
                         "excitation_assumed": cal.excitation_assumed,
                         "samples_per_period": cal.samples_per_period},
@@ -189,7 +189,10 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
                        "source": dg.calibration_.source},
         "warnings": list(dg.warnings_),
         "runtime_s": runtime_s,
-    })
+    }
+    if qrnn is not None:
+        rec["qrnn_coupling"] = qrnn
+    return jsonable(rec)
 
 
 def report_markdown(rec: dict[str, Any], figs: dict[str, Path]) -> str:
@@ -218,16 +221,42 @@ def report_markdown(rec: dict[str, Any], figs: dict[str, Path]) -> str:
               "## Every cause tested", "",
               "| cause | chi2 drop | null threshold | held-out gain | significant | evidence |",
               "|---|---|---|---|---|---|"]
+    # a gain is measured only as far as the decision needs (n/c: not computed)
     for c in rec["candidates"]:
         lines.append(f"| {c['cause']} | {c['delta_chi2']:.1f} | {c['threshold']:.1f} | "
-                     f"{c['gain']:+.3f} | {'yes' if c['significant'] else 'no'} | "
+                     f"{_num(c['gain'], '+.3f')} | {'yes' if c['significant'] else 'no'} | "
                      f"{c['evidence']} |")
+    design = rec["heldout"]["design"]
+    held = (f"the last {100 * rec['split']['heldout_fraction']:.0f} % of the periods, never "
+            f"fitted" if design == "tail" else
+            f"whole set-points, each predicted by the model refitted without it ({design}, "
+            f"{len(rec['heldout']['folds'])} refits)")
     lines += ["", "Evidence: drop of the output-error chi-square (orbit harmonics in units of "
               "their noise) when the cause's extension is added; significant above the "
-              "threshold calibrated on null traces and with a held-out gain above "
-              f"{rec['thresholds']['min_gain']:g}. Held-out: the last "
-              f"{100 * rec['split']['heldout_fraction']:.0f} % of the periods, never fitted.",
-              ""]
+              "threshold calibrated on null data and with a held-out gain above "
+              f"{rec['thresholds']['min_gain']:g}. Held-out: {held}.", ""]
+    if len(rec["causes"]) > 1:
+        lines += ["## Causes, step by step", "",
+                  "Each tested against the model extended by the ones before it.", "",
+                  "| step | cause | chi2 drop | threshold | gain added |", "|---|---|---|---|---|"]
+        for k, c in enumerate(rec["causes"], 1):
+            lines.append(f"| {k} | {c['cause']} | {c['delta_chi2']:.1f} | "
+                         f"{c['threshold']:.1f} | {c['gain']:+.3f} |")
+        lines.append("")
+    ce = rec.get("contact_exponent")
+    if ce:
+        lo, hi = ce["interval_95"]
+        lines += [f"Contact exponent {ce['exponent']:.2f}, 95 % profile-likelihood interval "
+                  f"[{lo:.2f}, {hi:.2f}]" + ("" if ce["bounded"] else
+                                            " -- the data do not bound it") + ".", ""]
+    if len(rec["observations"]) > 1:
+        lines += ["## Held-out NRMSE per set-point", "",
+                  "| observation | rest gap [nm] | baseline | extended |", "|---|---|---|---|"]
+        for o in rec["observations"]:
+            lines.append(f"| {o['index']} ({o['kind']}) | {o['gap_m'] * 1e9:.2f} | "
+                         f"{_num(o['baseline_heldout_nrmse'], '.4g')} | "
+                         f"{_num(o['extended_heldout_nrmse'], '.4g')} |")
+        lines.append("")
     q = rec.get("qrnn_coupling") or {}
     if "score" in q:
         lines += [f"QRNN mode-coupling score (issue 4's network, independent of the fits): "
@@ -244,6 +273,11 @@ def report_markdown(rec: dict[str, Any], figs: dict[str, Path]) -> str:
             lines += [f"### {captions.get(k, k)}", "", f"![{k}]({pth.name})", ""]
     lines.append(f"_afmlearn {rec['afmlearn_version']}, {rec['runtime_s']:.1f} s._")
     return "\n".join(lines) + "\n"
+
+
+def _num(v: float | None, fmt: str) -> str:
+    """``v`` formatted, ``n/c`` (not computed) for None / NaN."""
+    return "n/c" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, fmt)
 
 
 def _write_text(path: Path, text: str) -> Path:

@@ -113,6 +113,27 @@ class ModelSpec:
             names += ["neck"]
         return names
 
+    def term_keys(self) -> list[str]:
+        """A stable key per force coefficient (which feature it belongs to), so that the
+        coefficients of a nested model can be placed into an extension's vector."""
+        keys = ["vdw", "contact"]
+        for key, on in (("visco", self.visco_exponent), ("damping", self.damping_decay),
+                        ("electrostatic", self.electrostatic_radius),
+                        ("neck", self.neck_length)):
+            if on is not None:
+                keys.append(key)
+        return keys
+
+    def embed(self, spec: ModelSpec, coef: FloatArray) -> FloatArray:
+        """``coef = [K, D, B, c..]`` of a nested ``spec`` placed into this spec's layout (the
+        columns this spec adds start at zero)."""
+        out = np.zeros(3 + self.n_force)
+        out[:3] = coef[:3]
+        mine = self.term_keys()
+        for j, key in enumerate(spec.term_keys()):
+            out[3 + mine.index(key)] = coef[3 + j]
+        return out
+
     def signs(self) -> list[int]:
         """Sign constraint of each force coefficient (+1 >= 0, -1 <= 0, 0 free)."""
         out = [int(t.sign) for t in self.library().terms]

@@ -7,7 +7,7 @@ from typing import final
 
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
-from .base import AbstractHypothesis, Context, Parameter, energy_text, length_parameter
+from .base import AbstractHypothesis, Context, Parameter, energy_text, gain_text, length_parameter
 
 __all__ = ["AdhesionHysteresis"]
 
@@ -23,6 +23,8 @@ class AdhesionHysteresis(AbstractHypothesis):
 
     cause = "adhesion_hysteresis"
     extension = "neck (history-dependent adhesion)"
+    explanation = ("contact breaks later on retraction than it forms (a JKR-like neck): "
+                   "rate-independent loss at pull-off")
     # the snap is a jump of the force, which the linearised harmonic balance cannot rank:
     # every neck length of the grid goes to the output-error stage
     n_starts = 12
@@ -37,5 +39,5 @@ class AdhesionHysteresis(AbstractHypothesis):
                  energy=None) -> str:
         dc = (model.spec.neck_length or 0.0) * model.scales.length
         return (f"loss at pull-off: neck to {dc * 1e9:.2f} nm past contact; chi2 drop "
-                f"{delta_chi2:.1f}, held-out gain {gain:+.3f}"
+                f"{delta_chi2:.1f}, held-out gain {gain_text(gain)}"
                 f"{energy_text(model, energy)}")

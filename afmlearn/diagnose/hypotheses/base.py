@@ -13,7 +13,7 @@ from __future__ import annotations
 import abc
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar, final
+from typing import Any, ClassVar, Protocol, final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,7 +21,8 @@ from numpy.typing import NDArray
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
 
-__all__ = ["AbstractHypothesis", "Parameter", "Context", "energy_text", "length_parameter"]
+__all__ = ["AbstractHypothesis", "Parameter", "Context", "Probe", "energy_text",
+           "gain_text", "length_parameter"]
 
 
 @final
@@ -71,6 +72,18 @@ class Context:
     free_detector: tuple[float, float] | None = None
 
 
+class Probe(Protocol):
+    """What :meth:`AbstractHypothesis.details` may ask of a fitted extension."""
+
+    #: the raw 1-D records of the experiment (labels never read)
+    traces: Sequence[Any]
+
+    def profile(self, name: str, values: Sequence[float]) -> NDArray[np.float64]:
+        """Chi-square (harmonic balance, all observations) with the extension's parameter
+        ``name`` held at each of ``values`` and everything else refitted."""
+        ...
+
+
 class AbstractHypothesis(abc.ABC):
     """One cause and the model extension that represents it."""
 
@@ -78,6 +91,8 @@ class AbstractHypothesis(abc.ABC):
     cause: ClassVar[str] = ""
     #: the extension in words (report)
     extension: ClassVar[str] = ""
+    #: what the cause means physically, one sentence for the report's verdict
+    explanation: ClassVar[str] = ""
     #: equation-error solutions handed to the output-error stage as starts
     n_starts: ClassVar[int] = 3
 
@@ -93,6 +108,11 @@ class AbstractHypothesis(abc.ABC):
         """Parameter values at which the extension is the baseline."""
         return [p.grid[0] if p.nested is None else p.nested for p in params]
 
+    def details(self, model: DiagnosisModel, probe: Probe) -> dict[str, Any]:
+        """Further evidence of the fitted extension for the report (JSON-able values), with
+        an optional ``"text"`` appended to the evidence line. Default: nothing."""
+        return {}
+
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
                  energy: NDArray[np.float64] | None = None) -> str:
         """One line: what the fitted extension says physically, and how strongly.
@@ -100,7 +120,7 @@ class AbstractHypothesis(abc.ABC):
         ``energy``: energy into the sample per cycle [k L_ref^2] of (baseline, extension).
         """
         return (f"{self.extension}: chi2 drop {delta_chi2:.1f} (orbit-noise units), "
-                f"held-out gain {gain:+.3f}{energy_text(model, energy)}")
+                f"held-out gain {gain_text(gain)}{energy_text(model, energy)}")
 
 
 def length_parameter(name: str, low_m: float, high_m: float, ctx: Context, n: int, *,
@@ -110,6 +130,11 @@ def length_parameter(name: str, low_m: float, high_m: float, ctx: Context, n: in
     lo, hi = low_m / ctx.length_m, high_m / ctx.length_m
     grid = sorted({*np.geomspace(lo, hi, n).tolist(), *extra})
     return Parameter(name, lo, hi, tuple(grid), log=True)
+
+
+def gain_text(gain: float) -> str:
+    """``+0.123``, or ``not computed`` (NaN: the decision did not need it)."""
+    return "not computed" if gain != gain else f"{gain:+.3f}"
 
 
 def energy_text(model: DiagnosisModel, energy: NDArray[np.float64] | None) -> str:

@@ -7,7 +7,7 @@ from typing import final
 
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
-from .base import AbstractHypothesis, Context, Parameter
+from .base import AbstractHypothesis, Context, Parameter, gain_text
 
 __all__ = ["DetectorNonlinearity"]
 
@@ -22,6 +22,8 @@ class DetectorNonlinearity(AbstractHypothesis):
 
     cause = "detector_nonlinearity"
     extension = "detector map y = x + b2 x^2 + b3 x^3"
+    explanation = ("the detector, not the cantilever, distorts the signal (an output map "
+                   "with quadratic and cubic terms)")
 
     def parameters(self, ctx: Context) -> list[Parameter]:
         a = max(ctx.amplitude, 1e-6)
@@ -41,4 +43,4 @@ class DetectorNonlinearity(AbstractHypothesis):
                  energy=None) -> str:
         b2, b3 = model.spec.detector or (0.0, 0.0)
         return (f"output map b2 = {b2:.3g}/L, b3 = {b3:.3g}/L^2 (harmonics not shaped by the "
-                f"lever); chi2 drop {delta_chi2:.1f}, held-out gain {gain:+.3f}")
+                f"lever); chi2 drop {delta_chi2:.1f}, held-out gain {gain_text(gain)}")

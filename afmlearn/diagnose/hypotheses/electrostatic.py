@@ -7,7 +7,7 @@ from typing import final
 
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
-from .base import AbstractHypothesis, Context, Parameter, length_parameter
+from .base import AbstractHypothesis, Context, Parameter, gain_text, length_parameter
 
 __all__ = ["Electrostatic"]
 
@@ -18,6 +18,8 @@ class Electrostatic(AbstractHypothesis):
 
     cause = "electrostatic"
     extension = "electrostatic sphere term 1/(z(z+R))"
+    explanation = ("a long-range attraction decays slower than van der Waals "
+                   "(electrostatics: bias or trapped charge)")
 
     def parameters(self, ctx: Context) -> list[Parameter]:
         return [length_parameter("radius", 1e-9, 100e-9, ctx, 7, extra=(ctx.tip_radius,))]
@@ -29,4 +31,4 @@ class Electrostatic(AbstractHypothesis):
                  energy=None) -> str:
         r = (model.spec.electrostatic_radius or 0.0) * model.scales.length
         return (f"1/(z(z+R)) attraction with R = {r * 1e9:.1f} nm; chi2 drop {delta_chi2:.1f},"
-                f" held-out gain {gain:+.3f}")
+                f" held-out gain {gain_text(gain)}")

@@ -7,7 +7,7 @@ from typing import final
 
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
-from .base import AbstractHypothesis, Context, Parameter, energy_text, length_parameter
+from .base import AbstractHypothesis, Context, Parameter, energy_text, gain_text, length_parameter
 
 __all__ = ["LongRangeDamping"]
 
@@ -18,6 +18,8 @@ class LongRangeDamping(AbstractHypothesis):
 
     cause = "long_range_damping"
     extension = "distance-decaying damping exp(-z/z_b) z'"
+    explanation = ("energy is lost out of contact, by a damping that decays with the gap "
+                   "(squeeze film, hydration or capillary layer)")
 
     def parameters(self, ctx: Context) -> list[Parameter]:
         return [length_parameter("decay_length", 1e-9, 20e-9, ctx, 8)]
@@ -29,5 +31,5 @@ class LongRangeDamping(AbstractHypothesis):
                  energy=None) -> str:
         zb = (model.spec.damping_decay or 0.0) * model.scales.length
         return (f"loss out of contact, decay length {zb * 1e9:.2f} nm; chi2 drop "
-                f"{delta_chi2:.1f}, held-out gain {gain:+.3f}"
+                f"{delta_chi2:.1f}, held-out gain {gain_text(gain)}"
                 f"{energy_text(model, energy)}")

@@ -7,7 +7,7 @@ from typing import final
 
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
-from .base import AbstractHypothesis, Context, Parameter, energy_text
+from .base import AbstractHypothesis, Context, Parameter, energy_text, gain_text
 
 __all__ = ["Viscoelastic"]
 
@@ -26,6 +26,8 @@ class Viscoelastic(AbstractHypothesis):
 
     cause = "viscoelastic"
     extension = "visco-elastic contact term sqrt(delta) delta'"
+    explanation = ("the sample dissipates energy while indented, at a rate set by the "
+                   "indentation speed (visco-elastic contact)")
     exponent = 0.5
 
     def parameters(self, ctx: Context) -> list[Parameter]:
@@ -37,5 +39,5 @@ class Viscoelastic(AbstractHypothesis):
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
                  energy=None) -> str:
         return (f"loss only while indenting, delta^{model.spec.visco_exponent:.2f} delta' term; "
-                f"chi2 drop {delta_chi2:.1f}, held-out gain {gain:+.3f}"
+                f"chi2 drop {delta_chi2:.1f}, held-out gain {gain_text(gain)}"
                 f"{energy_text(model, energy)}")

@@ -17,7 +17,7 @@ from afmlearn.diagnose.balance import (
     synthesize,
     to_real,
 )
-from afmlearn.diagnose.hypotheses import Parameter
+from afmlearn.diagnose.joint import JointBalance
 from afmlearn.diagnose.output_error import OutputError
 from afmlearn.diagnose.spec import ModelSpec
 from afmlearn.io import read_trace
@@ -66,23 +66,25 @@ def test_whitened_chi2_is_chi_square_at_the_truth(make_trace):
     # chi-square with ~rows - 6 degrees of freedom: mean rows - 6, sd sqrt(2 rows)
     assert abs(best.chi2 - (rows - 6)) < 4 * np.sqrt(2 * rows)
     # output error (the model's own orbit against the measured harmonics): at the true force
-    # law, with only the lever's phase, damping and drive refitted, chi2 is chi-square too,
-    # and the refined fit is no worse than the truth. (Coefficients are not asserted: at 1 %
-    # noise the van der Waals coefficient and the contact stiffness trade off within noise.)
-    oe = OutputError(hb, cal.scales)
+    # law, with only the lever's phase (projected out in closed form), damping and drive
+    # refitted, chi2 is chi-square too, and the refined fit is no worse than the truth.
+    # (Coefficients are not asserted: at 1 % noise the van der Waals coefficient and the
+    # contact stiffness trade off within noise.)
+    oe = OutputError(JointBalance([hb], [None]), cal.scales)
     a0 = p["a0"]
     ph = best.spec.drive_phase
 
     def build(v):
-        return ModelSpec(a0=a0, drive_phase=v[0])
+        return ModelSpec(a0=a0)
 
     true = np.array([1.0, best.coef[1], best.coef[2], -p["vdw"], p["stiffness"]])
-    start = Solution(spec=best.spec, coef=true, residual=best.residual, chi2=best.chi2,
-                     values=(ph,))
-    params = [Parameter("drive_phase", ph - 0.5, ph + 0.5, ())]
-    at_truth, ok = oe.refine(start, build, params, max_nfev=60)
+    start = Solution(spec=ModelSpec(a0=a0), coef=true, residual=best.residual,
+                     chi2=best.chi2, values=(), phases=(ph,))
+    at_truth, ok = oe.refine(start, build, [], max_nfev=60)
     assert ok
     assert abs(at_truth.chi2 - (rows - 6)) < 4 * np.sqrt(2 * rows)
-    fitted, ok = oe.refine(dataclasses.replace(best, values=(ph,)), build, params,
-                           max_nfev=60)
+    # the projected phase is the phase the equation error found
+    assert abs(at_truth.phases[0] - ph) < 0.05
+    fitted, ok = oe.refine(dataclasses.replace(best, spec=ModelSpec(a0=a0), values=(),
+                                               phases=(ph,)), build, [], max_nfev=60)
     assert ok and fitted.chi2 <= at_truth.chi2 + 2 * np.sqrt(2 * rows)

@@ -1,0 +1,228 @@
+"""The observations a diagnosis fits: steady records (set-points) and windows of a ramp.
+
+An experiment's observations share the cantilever and the tip--sample law. Each is
+calibrated (:func:`afmlearn.preprocess.calibrate`; the labels are never read) and then
+rescaled to one common length ``L_ref`` (the mean rest gap over the experiment), so that one
+dimensionless force law holds for all of them.
+
+A ramp (``gap_m`` of shape (n,)) is cut into windows of a few tens of drive periods, each
+treated as a quasi-steady observation at the window's mean rest gap (the slowly varying gap
+is known from the file). That is exact when the gap changes little over the lever's settling
+time (about ``Q / pi`` periods); a faster ramp is diagnosed with a warning.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal, final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from afmlearn.io import Trace
+from afmlearn.preprocess import Calibrated, calibrate, check_trace
+from simulator import Scales
+
+from .joint import PhasePrior
+
+__all__ = ["Observation", "build_observations", "as_traces", "folds"]
+
+FloatArray = NDArray[np.float64]
+
+#: calibration fields every observation of one experiment must share
+_SHARED = ("sample_rate_hz", "spring_constant_n_per_m", "quality_factor",
+           "resonance_frequency_hz", "excitation")
+
+
+@final
+@dataclass(frozen=True, eq=False)
+class Observation:
+    """One quasi-steady record at one rest gap, in the experiment's common units.
+
+    Attributes
+    ----------
+    index : int
+        Position of the source record in the experiment.
+    kind : {"steady", "ramp_window"}
+    cal : Calibrated
+        The record (the whole ramp for a window), rescaled to the common ``L_ref``.
+    start, stop : int
+        Sample range of this observation in ``cal``.
+    gap : float
+        Rest gap / ``L_ref`` (a window's mean).
+    phase_prior : (float, float) or None
+        Recorded drive phase in the model's convention (``B cos(Omega tau - phi)``, ``tau``
+        from the record's first sample: ``phi = -drive_phase_rad``) and its standard
+        deviation [rad]; None when not recorded.
+    trace : Trace
+        The 1-D source record (for evidence that reads raw data, e.g. the QRNN score).
+    """
+
+    index: int
+    kind: Literal["steady", "ramp_window"]
+    cal: Calibrated
+    start: int
+    stop: int
+    gap: float
+    phase_prior: PhasePrior | None
+    trace: Trace
+
+    @property
+    def gap_m(self) -> float:
+        return self.gap * self.cal.scales.length
+
+    @property
+    def tau(self) -> FloatArray:
+        return self.cal.tau[self.start:self.stop]
+
+    @property
+    def x(self) -> FloatArray:
+        return self.cal.x[self.start:self.stop]
+
+    @property
+    def n_periods(self) -> float:
+        return (self.stop - self.start) / self.cal.samples_per_period
+
+
+def as_traces(data: Any, row: int | None = None) -> list[Trace]:
+    """The 1-D records of ``data``: an ``afmlearn.io.Experiment``, a Trace or a list of them.
+
+    A set-point series gives one record per row; a sweep needs ``row`` (its rows are
+    different drive frequencies, diagnosed one at a time); ``row`` picks one row of either.
+    """
+    if isinstance(data, Trace):
+        if data.has_rows:
+            if row is not None:
+                return [data.row(row)]
+            if data.is_sweep:
+                raise ValueError(f"row must be given for a sweep (an integer in "
+                                 f"[0, {data.n_points})): its rows are different drive "
+                                 f"frequencies")
+            return [data.row(i) for i in range(data.n_points)]
+        if row not in (None, 0):
+            raise ValueError(f"row must be None (or 0) for a single trace, got {row!r}")
+        return [data]
+    if isinstance(data, Sequence) or hasattr(data, "__iter__"):
+        out = list(data)
+        if out and all(isinstance(t, Trace) and not t.has_rows for t in out):
+            if row is not None:
+                if isinstance(row, bool) or not isinstance(row, int) \
+                        or not 0 <= row < len(out):
+                    raise ValueError(f"row must be an integer in [0, {len(out)}), got {row!r}")
+                return [out[row]]
+            return out
+    raise ValueError(f"data must be an afmlearn.io.Experiment, a Trace or a list of 1-D "
+                     f"Traces, got {type(data).__name__}")
+
+
+def _check_shared(traces: Sequence[Trace]) -> None:
+    first = traces[0]
+    for t in traces[1:]:
+        for name in _SHARED:
+            a, b = getattr(first, name), getattr(t, name)
+            if a != b and not (isinstance(a, float) and isinstance(b, float)
+                               and math.isclose(a, b, rel_tol=1e-9)):
+                raise ValueError(f"observations must share {name}: {a!r} != {b!r}")
+
+
+def _rescale(cal: Calibrated, length: float) -> Calibrated:
+    """``cal`` in units of ``length`` instead of its own mean rest gap."""
+    f = cal.scales.length / length
+
+    def s(v: Any) -> Any:
+        if v is None:
+            return None
+        out = np.asarray(v, float) * f
+        if out.ndim == 0:
+            return float(out)
+        out.flags.writeable = False
+        return out
+
+    return dataclasses.replace(
+        cal, x=s(cal.x), gap=s(cal.gap), drive_amplitude=s(cal.drive_amplitude),
+        dither=s(cal.dither), tip_radius=s(cal.tip_radius),
+        scales=Scales(spring_constant=cal.scales.spring_constant,
+                      resonance_frequency=cal.scales.resonance_frequency, length=length))
+
+
+def build_observations(traces: Sequence[Trace], *, phase_sd: float, window_periods: float,
+                       max_windows: int, warnings: list[str]) -> list[Observation]:
+    """Check, calibrate and rescale every record; cut ramps into windows.
+
+    Parameters
+    ----------
+    traces : sequence of Trace
+        1-D records sharing the calibration (:func:`as_traces`).
+    phase_sd : float
+        Standard deviation [rad] given to a recorded drive phase.
+    window_periods : float
+        Length of a ramp window in drive periods.
+    max_windows : int
+        Most windows taken from one ramp (spread evenly over it).
+    warnings : list of str
+        Appended to.
+    """
+    if not traces:
+        raise ValueError("data: the experiment has no observations")
+    _check_shared(traces)
+    cals = []
+    for t in traces:
+        check_trace(t)
+        cals.append(calibrate(t))
+    length = float(np.mean([c.scales.length for c in cals]))
+    out: list[Observation] = []
+    base_excitation = traces[0].excitation == "base"
+    for i, (t, c) in enumerate(zip(traces, cals, strict=True)):
+        c = _rescale(c, length)
+        prior = None
+        if t.drive_phase_rad is not None:
+            if base_excitation:
+                if i == 0:
+                    warnings.append("base excitation: the recorded drive phase is the "
+                                    "dither's, not the modal force's; it is fitted instead")
+            else:
+                prior = (-float(np.asarray(t.drive_phase_rad).reshape(-1)[0]), float(phase_sd))
+        if np.ndim(c.gap) == 0:
+            out.append(Observation(i, "steady", c, 0, c.n_samples, float(c.gap), prior, t))
+            continue
+        out += _windows(i, t, c, prior, window_periods, max_windows, warnings)
+    return out
+
+
+def _windows(i: int, t: Trace, c: Calibrated, prior: PhasePrior | None, window_periods: float,
+             max_windows: int, warnings: list[str]) -> list[Observation]:
+    """Quasi-steady windows of a ramp record, at most ``max_windows``, evenly spread."""
+    spp = c.samples_per_period
+    w = int(round(window_periods * spp))
+    n_win = int(c.n_samples // w)
+    if n_win < 1:
+        raise ValueError(f"data: the ramp of observation {i} spans "
+                         f"{c.n_samples / spp:.1f} drive periods; a ramp window needs "
+                         f"{window_periods:g}")
+    gap = np.asarray(c.gap, float)
+    picks = np.unique(np.round(np.linspace(0, n_win - 1, min(n_win, max_windows))).astype(int))
+    # gap change over the settling time Q/pi periods, against the orbit's own size
+    rate = float(np.max(np.abs(np.diff(gap)))) * spp if gap.size > 1 else 0.0
+    lag = rate * c.quality_factor / math.pi
+    if lag > 0.02:
+        warnings.append(f"observation {i}: the ramp moves the gap by {100 * lag:.1f} % of "
+                        f"L_ref per settling time (Q/pi periods); its windows are treated as "
+                        f"quasi-steady, which biases them")
+    out = []
+    for k in picks:
+        s, e = int(k * w), int((k + 1) * w)
+        out.append(Observation(i, "ramp_window", c, s, e, float(np.mean(gap[s:e])), prior, t))
+    return out
+
+
+def folds(gaps: Sequence[float], max_folds: int) -> list[list[int]]:
+    """Held-out groups of observations: one each (leave one out) when there are at most
+    ``max_folds``, else ``max_folds`` groups interleaved in gap order (each spans the range).
+    """
+    n = len(gaps)
+    order = np.argsort(np.asarray(gaps, float))
+    k = min(n, max_folds)
+    return [sorted(int(j) for j in order[f::k]) for f in range(k)]
