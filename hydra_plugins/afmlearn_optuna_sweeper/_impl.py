@@ -162,7 +162,6 @@ class OptunaSweeperImpl:
             raise
         return space, folds
 
-    @staticmethod
     def _enqueue_baseline(self, study: optuna.Study, space: SearchSpace) -> None:
         """Queue the config's own values as the first trial (the "before" of the study)."""
         cfg = self.hydra_context.config_loader.load_sweep_config(self.config, list(space.fixed))
@@ -180,6 +179,7 @@ class OptunaSweeperImpl:
         study.enqueue_trial(params, user_attrs={"baseline": True})
         log.info("baseline trial queued: %s", params)
 
+    @staticmethod
     def _single_overrides(space: SearchSpace, folds: tuple[str, list[Any]] | None
                           ) -> list[tuple[str, str]]:
         out = [(k, f"{k}={format_value(v)}") for k, v in space.example().items()]

@@ -71,7 +71,7 @@ def test_two_workers_share_sqlite(tmp_path: Path, run_toy) -> None:
     url = f"sqlite:///{tmp_path / 'toy.db'}"
     marks = tmp_path / "marks"
     done = run_toy(f"hydra.sweeper.storage={url}", "hydra.sweeper.n_trials=6",
-                   "hydra.sweeper.n_jobs=2", "hydra.sweeper.baseline=true", "sleep_s=0.5",
+                   "hydra.sweeper.n_jobs=2", "hydra.sweeper.baseline=true", "sleep_s=3.0",
                    f"marker_dir={marks}", *FAST)
     assert done.returncode == 0, done.stderr[-2000:]
     study = _study(url)

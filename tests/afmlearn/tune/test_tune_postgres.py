@@ -20,7 +20,7 @@ def test_two_workers_share_postgresql(tmp_path: Path, postgres_url: str) -> None
     marks = tmp_path / "marks"
     cmd = [sys.executable, str(TOY), "-m", f"hydra.sweeper.storage={postgres_url}",
            "hydra.sweeper.study_name=toy_pg", "hydra.sweeper.n_trials=6",
-           "hydra.sweeper.n_jobs=2", "sleep_s=0.5", f"marker_dir={marks}"]
+           "hydra.sweeper.n_jobs=2", "sleep_s=3.0", f"marker_dir={marks}"]
     done = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=300,
                           env={**os.environ, "PYTHONWARNINGS": "ignore"})
     assert done.returncode == 0, done.stderr[-2000:]
