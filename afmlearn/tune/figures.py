@@ -56,7 +56,7 @@ def write_figures(study: optuna.Study, folder: str | Path) -> dict[str, Path]:
             log.info("figure %s skipped: %s", name, err)
             continue
         fig = ax.figure if hasattr(ax, "figure") else ax.flat[0].figure
-        fig.set_size_inches(8, 5)
+        fig.set_size_inches(10, 5.5)
         fig.tight_layout()
         path = out / f"{name}.png"
         with atomic_path(path) as tmp:

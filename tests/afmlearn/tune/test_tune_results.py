@@ -55,3 +55,12 @@ def test_summary_counts_states() -> None:
     assert doc["best"]["number"] == study.best_trial.number
     table = summary_table(study)
     assert table.splitlines()[3].split()[0] == str(study.best_trial.number)  # best row first
+
+
+def test_figures_are_written(tmp_path: Path) -> None:
+    from afmlearn.tune.figures import write_figures
+
+    files = write_figures(_study(), tmp_path)
+    assert set(files) == {"history", "importances", "parallel"}
+    for path in files.values():
+        assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
