@@ -106,7 +106,7 @@ def fit_offsets(problem: JointProblem, library: AFMLibrary, a0: float, coef: Flo
             return float(r @ r) + problem.noise_scale * (d / s) ** 2
 
         res = minimize_scalar(cost, bounds=(-5 * s, 5 * s), method="bounded",
-                              options={"xatol": 0.02 * s, "maxiter": 20})
+                              options={"xatol": 0.05 * s, "maxiter": 12})
         out[i] = float(res.x) if res.fun <= cost(float(out[i])) else out[i]
     return problem.with_offsets(out)
 
@@ -469,9 +469,10 @@ class ExponentProfile:
         prof = table()
         lo_p, hi_p = profile_interval(prof, n_rows)
         p_best = float(prof[int(np.nanargmin(prof[:, 1])), 0])
-        for centre in {lo_p, hi_p, p_best}:
+        for centre in {lo_p, hi_p}:  # the interval's ends at the fine step
             if math.isfinite(centre):
-                for p in np.arange(centre - self.step, centre + self.step + 1e-9, self.fine):
+                for p in np.arange(centre - self.step + self.fine, centre + self.step - 1e-9,
+                                   self.fine):
                     add(p)
         prof = table()
         lo_p, hi_p = profile_interval(prof, n_rows)

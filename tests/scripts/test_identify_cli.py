@@ -138,3 +138,28 @@ def test_missing_file(tmp_path, script, monkeypatch, capsys):
                          f"out_dir={tmp_path / 'o'}")
     assert code == 2
     assert err.startswith("error: ") and "nope.h5" in err
+
+
+@pytest.mark.slow
+def test_series_file_all_rows_jointly_and_bad_row(tmp_path, script, monkeypatch, capsys):
+    """A set-point series: every row jointly by default (the exponent line is printed);
+    an out-of-range `row` is one clear error line with exit status 2."""
+    path = tmp_path / "series.h5"
+    with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose("simulate", overrides=[
+            "scenario=spectroscopy", "scenario.gap_ratios=[0.9,0.7,0.5]",
+            "scenario.n_periods=30", "scenario.samples_per_period=100",
+            "cantilever.quality_factor=120", "noise.level=0.002", "free_trace_periods=5",
+            "progress=false", f"output={path}"])
+    simulate(cfg)
+    code, err = run_main(script, monkeypatch, capsys, f"trace={path}",
+                         f"out_dir={tmp_path / 'bad'}", "row=7", "figures=false")
+    assert code == 2 and err.startswith("error: row must be null") and err.count("\n") == 1
+    out = tmp_path / "out"
+    proc = run_identify(tmp_path, f"trace={path}", f"out_dir={out}", "identifier=fast",
+                        "figures=true", "identifier.refine=false")
+    assert proc.returncode == 0, proc.stderr
+    assert "interaction exponent" in proc.stdout or "no contact term" in proc.stdout
+    res = json.loads((out / "result.json").read_text())
+    assert res["joint"]["n_observations"] == 3
+    assert (out / "force.png").exists()
