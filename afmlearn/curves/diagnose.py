@@ -4,9 +4,11 @@ Each hypothesis (``hypotheses.EXTENSIONS``) is fitted to the approach branch fro
 baseline's solution. Its evidence is the change of the Bayesian information criterion with a
 Gaussian likelihood of unknown variance, ``n ln(chi2_base / chi2_ext) - k ln n`` (``k`` extra
 parameters, ``n`` residuals); the gain is measured on data not fitted, the retraction branch:
-``1 - nrmse_ext / nrmse_base``. The cause named is the hypothesis with the largest evidence if
-that exceeds ``threshold`` and its held-out gain is positive, else ``none``; its confidence is
-its BIC weight among the baseline and the candidates.
+``1 - nrmse_ext / nrmse_base``. The cause named is the hypothesis with the largest evidence
+among those with a positive held-out gain if that exceeds ``threshold``, else ``none``; its
+confidence is
+its BIC weight among the baseline and the candidates with a positive held-out gain (a
+candidate that predicts the retraction worse than the baseline is refuted and skipped).
 """
 
 from __future__ import annotations
@@ -107,16 +109,20 @@ class CurveDiagnoser:
             self.fits_[h.cause] = f
             cands.append({"cause": h.cause, "evidence": float(evidence), "gain": float(gain),
                           "heldout_nrmse": float(e_held), "chi2": float(chi2)})
-        ev = np.array([0.0] + [c["evidence"] for c in cands])
+        # BIC weights among the baseline and the candidates that predict the held-out
+        # retraction better than it (the others are refuted by data they did not see)
+        ok = [not (c["gain"] <= 0.0) for c in cands]
+        ev = np.array([0.0] + [c["evidence"] for c, o in zip(cands, ok, strict=True) if o])
         w = np.exp(0.5 * (ev - ev.max()))
         w /= w.sum()
-        for c, wi in zip(cands, w[1:], strict=True):
-            c["score"] = float(wi)
+        weights = iter(w[1:])
+        for c, o in zip(cands, ok, strict=True):
+            c["score"] = float(next(weights)) if o else 0.0
         cands.sort(key=lambda c: c["evidence"], reverse=True)
         self.candidates_ = cands
-        best = cands[0] if cands else None
-        named = (best is not None and best["evidence"] > self.threshold
-                 and not (best["gain"] <= 0.0))
+        eligible = [c for c, o in zip(cands, ok, strict=True) if o]
+        best = eligible[0] if eligible else None
+        named = best is not None and best["evidence"] > self.threshold
         self.cause_ = best["cause"] if named else "none"
         self.confidence_ = float(best["score"] if named else w[0])
         self.gain_ = float(best["gain"]) if named else 0.0
