@@ -4,6 +4,7 @@ Examples
 --------
     python scripts/analyze_curves.py trace=outputs/curve.h5 out_dir=outputs/curves
     python scripts/analyze_curves.py trace=AZ_0052.ibw out_dir=out     # an Asylum file
+    python scripts/analyze_curves.py trace=On_Surface/ out_dir=out     # every file of a folder
 
 Writes <out_dir>/report.json (design.md section 3 keys plus `curve`: free amplitude, surface
 position, dissipated energy, adhesion) and figures (afmlearn.plots.curves). The file's /labels
@@ -13,22 +14,34 @@ group is never read. Bad input prints `error: ...` (one line) and exits with sta
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import hydra
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
-from afmlearn.curves.analyze import analyze_curve
-from afmlearn.plots.curves import curve_figures
+from afmlearn.curves.analyze import analyze_curve, analyze_folder
+from afmlearn.plots.curves import curve_figures, plot_parameter_spread
 
 
 @hydra.main(config_path="../conf", config_name="analyze_curves", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.curves.analyze.analyze_curve` and print the finding."""
+    figures = curve_figures if cfg.figures else None
     try:
+        if Path(cfg.trace).is_dir():
+            summary = analyze_folder(cfg.trace, cfg.out_dir,
+                                     make_diagnoser=lambda: instantiate(cfg.diagnoser),
+                                     figures=figures,
+                                     summary_figure=plot_parameter_spread if cfg.figures
+                                     else None)
+            print(f"causes: {summary['causes']} ({summary['n_analysed']} of "
+                  f"{summary['n_files']} files)")
+            print(f"wrote {cfg.out_dir}/summary.json")
+            return
         diagnoser = instantiate(cfg.diagnoser)
         report = analyze_curve(cfg.trace, cfg.out_dir, diagnoser=diagnoser, index=cfg.index,
-                               figures=curve_figures if cfg.figures else None)
+                               figures=figures)
     except (ValueError, OSError) as err:  # RecordingError and TraceFormatError are ValueErrors
         print(f"error: {str(err).splitlines()[0] if str(err) else type(err).__name__}",
               file=sys.stderr)

@@ -16,7 +16,7 @@ from simulator.lockin import LockIn
 from .curve import Curve
 from .diagnose import CurveDiagnoser
 
-__all__ = ["analyze_curve", "load_curve"]
+__all__ = ["analyze_curve", "analyze_folder", "load_curve"]
 
 log = logging.getLogger(__name__)
 
@@ -90,3 +90,45 @@ def analyze_curve(trace: str | os.PathLike[str], out_dir: str | os.PathLike[str]
     log.info("%s: cause %s (confidence %.2f, gain %.3f)", Path(trace).name, report["cause"],
              report["confidence"], report["gain"])
     return report
+
+
+def analyze_folder(folder: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
+                   make_diagnoser: Callable[[], CurveDiagnoser] = CurveDiagnoser,
+                   figures: Callable[[CurveDiagnoser, Path], list[Path]] | None = None,
+                   summary_figure: Callable[[list[dict], Path], Path] | None = None,
+                   ) -> dict[str, Any]:
+    """Every curve file of ``folder`` (sorted): ``<out_dir>/<stem>/report.json`` each and
+    ``<out_dir>/summary.json`` (cause counts, gains, fitted parameters per curve).
+
+    A file that cannot be analysed is listed with its one-line error, never aborts the batch.
+    """
+    folder = Path(folder)
+    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix in (".h5", ".ibw"))
+    if not files:
+        raise ValueError(f"trace: no .h5 or .ibw files in {folder}")
+    out = Path(out_dir)
+    rows: list[dict[str, Any]] = []
+    for p in files:
+        try:
+            rep = analyze_curve(p, out / p.stem, diagnoser=make_diagnoser(), figures=figures)
+        except ValueError as err:
+            rows.append({"file": p.name, "error": str(err).splitlines()[0]})
+            continue
+        ext = rep["extended"]["parameters"]
+        rows.append({"file": p.name, "cause": rep["cause"], "gain": rep["gain"],
+                     "confidence": rep["confidence"],
+                     "free_amplitude_m": rep["curve"]["free_amplitude_m"],
+                     "adhesion_force_n": rep["curve"]["adhesion_force_n"],
+                     "heldout_nrmse_baseline": rep["baseline"]["heldout_nrmse"],
+                     "heldout_nrmse_extended": rep["extended"]["heldout_nrmse"],
+                     "parameters": ext})
+    done = [r for r in rows if "cause" in r]
+    causes = sorted({r["cause"] for r in done})
+    summary = {"n_files": len(files), "n_analysed": len(done),
+               "causes": {c: sum(r["cause"] == c for r in done) for c in causes},
+               "curves": rows, "figures": []}
+    out.mkdir(parents=True, exist_ok=True)
+    if summary_figure is not None and done:
+        summary["figures"] = [os.path.relpath(summary_figure(done, out), out)]
+    write_json(out / "summary.json", summary)
+    return summary

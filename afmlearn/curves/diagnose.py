@@ -177,13 +177,18 @@ class CurveDiagnoser:
 
 
 def heldout_nrmse(fit: CurveFitter, curve: Curve, mask: np.ndarray) -> float:
-    """Mean of the amplitude and phase NRMSE (``design.md`` §4) on the points ``mask``."""
+    """Mean of the amplitude and phase NRMSE on the points ``mask``.
+
+    ``design.md`` §4 NRMSE with fixed scales: the free amplitude for the amplitude and
+    ``pi/2`` (free resonance to full repulsion) for the phase, so that a curve in which the
+    tip never meets the surface (flat data, a tiny range) gets a comparable number.
+    """
     if not np.any(mask):
         return float("nan")
     a, p = fit.predict(curve)
     dp = (p - curve.phase + np.pi) % (2 * np.pi) - np.pi
-    return 0.5 * (nrmse(a[mask], curve.amplitude[mask])
-                  + nrmse(curve.phase[mask] + dp[mask], curve.phase[mask]))
+    return 0.5 * (nrmse(a[mask], curve.amplitude[mask], scale=1.0)
+                  + nrmse(curve.phase[mask] + dp[mask], curve.phase[mask], scale=np.pi / 2))
 
 
 def equation(law: CurveLaw, curve: Curve) -> str:

@@ -23,7 +23,8 @@ from matplotlib.figure import Figure
 from afmlearn.curves import CurveDiagnoser
 from afmlearn.io._atomic import atomic_path
 
-__all__ = ["plot_curve_fit", "plot_curve_force", "plot_curve_dissipation", "curve_figures"]
+__all__ = ["plot_curve_fit", "plot_curve_force", "plot_curve_dissipation", "curve_figures",
+           "plot_parameter_spread"]
 
 
 def _save(fig: Figure, path: Path) -> Path:
@@ -103,3 +104,23 @@ def curve_figures(diag: CurveDiagnoser, out_dir: Path) -> list[Path]:
     return [plot_curve_fit(diag, out / "curve_fit.png"),
             plot_curve_force(diag, out / "curve_force.png"),
             plot_curve_dissipation(diag, out / "curve_dissipation.png")]
+
+
+def plot_parameter_spread(rows: list[dict], out_dir: Path) -> Path:
+    """Histograms of fitted parameters across curves (``analyze_folder`` rows)."""
+    keys = [("adhesion_force_n", 1e9, "adhesion force [nN]"),
+            ("free_amplitude_m", 1e9, "free amplitude [nm]"),
+            ("gain", 1.0, "held-out gain")]
+    fig = Figure(figsize=(10.0, 3.2))
+    axes = fig.subplots(1, len(keys))
+    for ax, (key, scale, label) in zip(axes, keys, strict=True):
+        v = np.array([r[key] for r in rows if r.get(key) is not None], dtype=float) * scale
+        ax.hist(v[np.isfinite(v)], bins=12, color="#1f77b4")
+        ax.set_xlabel(label)
+    axes[0].set_ylabel("curves")
+    causes = {}
+    for r in rows:
+        causes[r["cause"]] = causes.get(r["cause"], 0) + 1
+    fig.suptitle(", ".join(f"{c}: {n}" for c, n in sorted(causes.items())), fontsize=9)
+    fig.tight_layout()
+    return _save(fig, Path(out_dir) / "parameter_spread.png")
