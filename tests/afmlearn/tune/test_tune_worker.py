@@ -47,6 +47,7 @@ def test_concurrent_workers_reach_exactly_n_trials(tmp_path: Path) -> None:
     assert again.complete == 0 and len(study.get_trials(states=FINISHED)) == 7
 
 
+@pytest.mark.filterwarnings("ignore:Heartbeat of storage")
 def test_dead_trial_is_failed_and_retried_with_its_parameters(tmp_path: Path) -> None:
     storage = open_storage(f"sqlite:///{tmp_path / 's.db'}", heartbeat_interval=1,
                            grace_period=2)
