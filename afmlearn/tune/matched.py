@@ -147,7 +147,8 @@ def matched_config(cfg: DictConfig, calibration: dict[str, Any]) -> DictConfig:
         sim.labels = True
         sim.progress = False
         sim.free_trace = True
-        sim.shard = {"index": 0, "count": n_exp, "overwrite": False}
+        # a dataset folder needs count >= 2; experiment i depends on (seed, i) only
+        sim.shard = {"index": 0, "count": max(n_exp, 2), "overwrite": False}
         sim.dataset = {"ranges": OmegaConf.to_container(m.ranges, resolve=True)}
         OmegaConf.resolve(sim)
         digest = hashlib.sha1(json.dumps(OmegaConf.to_container(sim), sort_keys=True,
