@@ -30,7 +30,8 @@ def main(cfg: DictConfig) -> None:
         torch.set_num_threads(int(cfg.threads))
     try:
         result = infer(cfg.trace, cfg.out_dir, checkpoint=cfg.checkpoint,
-                       threshold=float(cfg.threshold), figures=bool(cfg.figures))
+                       threshold=None if cfg.threshold is None else float(cfg.threshold),
+                       figures=bool(cfg.figures))
     except ValueError as err:          # includes afmlearn.io.TraceFormatError
         print(f"error: {err}", file=sys.stderr)
         sys.exit(2)
@@ -42,7 +43,9 @@ def main(cfg: DictConfig) -> None:
             print(f"sweet spot ({spot['direction']}): "
                   + ("none" if iv is None else f"{iv[0] / 1e3:.3f} - {iv[1] / 1e3:.3f} kHz"))
     else:
-        print(f"coupling score {result['score']:.3f}, flag {result['flag']}")
+        what = "probability" if result["calibrated"] else "score"
+        print(f"coupling {what} {result['score']:.3f} (threshold {result['threshold']:.3g}), "
+              f"flag {result['flag']}")
     print(f"wrote {result['output']}")
     for path in result["figures"]:
         print(f"      {path}")

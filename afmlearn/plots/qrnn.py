@@ -6,6 +6,9 @@
 `plot_scores`
     Coupling and sweet-spot scores per trace vs drive frequency, the threshold and the
     sweet-spot interval(s).
+`plot_reliability`
+    Reliability diagram of coupling probabilities (observed coupled fraction per bin of
+    predicted probability), several sets side by side, with the flag threshold.
 `plot_unit_activation`
     Mean hidden-unit activation vs drive frequency across a sweep: the modal shares on top, the
     units most correlated with each target below (``afmlearn.qrnn.interpret``).
@@ -28,7 +31,7 @@ from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import savgol_filter
 
-__all__ = ["plot_prediction", "plot_scores", "plot_unit_activation"]
+__all__ = ["plot_prediction", "plot_reliability", "plot_scores", "plot_unit_activation"]
 
 _MEASURED, _PREDICTED, _SWEET = "#1f77b4", "#d62728", "#2ca02c"
 
@@ -99,6 +102,48 @@ def plot_prediction(measured: ArrayLike, predicted: ArrayLike, path: str | os.Pa
     ax2.set_ylabel("d deflection / d(drive phase) [per rad]")
     ax2.set_title("phase-space orbit (predicted periods)")
     ax2.legend(fontsize=8)
+    return _save(fig, path)
+
+
+def plot_reliability(curves: dict[str, dict[str, Any]], path: str | os.PathLike[str], *,
+                     threshold: float | None = None, title: str = "") -> Path:
+    """Reliability diagram: observed coupled fraction vs mean predicted probability per bin.
+
+    Parameters
+    ----------
+    curves : dict
+        Legend label -> `afmlearn.qrnn.calibration.reliability_curve` output
+        (``mean_predicted``, ``observed``, ``count``; shape (n_bins,) each).
+    path : path-like
+    threshold : float, optional
+        Flag threshold, drawn as a vertical line.
+    """
+    fig = Figure(figsize=(9, 4.2), layout="constrained")
+    ax, axc = fig.subplots(1, 2, width_ratios=[1.3, 1])
+    ax.plot([0, 1], [0, 1], color="0.6", lw=1, ls="--", label="perfect calibration")
+    for i, (name, r) in enumerate(curves.items()):
+        ok = np.asarray(r["count"]) > 0
+        mp, ob = np.asarray(r["mean_predicted"])[ok], np.asarray(r["observed"])[ok]
+        n = np.asarray(r["count"])[ok]
+        color = f"C{i}"
+        ax.plot(mp, ob, "o-", color=color, ms=4, lw=1.2, label=name)
+        centers = (np.flatnonzero(ok) + 0.5) / len(r["count"])
+        axc.bar(centers + (i - 0.5 * (len(curves) - 1)) * 0.8 / len(r["count"]) / len(curves),
+                n, width=0.8 / len(r["count"]) / len(curves), color=color, label=name)
+    if threshold is not None:
+        for a in (ax, axc):
+            a.axvline(threshold, color="0.3", ls=":", lw=1)
+        ax.text(threshold, 0.02, f" threshold {threshold:.3g}", fontsize=8)
+    ax.set_xlim(0, 1)
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("predicted probability of coupling (bin mean)")
+    ax.set_ylabel("observed coupled fraction")
+    ax.set_title(title or "reliability of the coupling probability")
+    ax.legend(fontsize=8, loc="upper left")
+    axc.set_yscale("log")
+    axc.set_xlim(0, 1)
+    axc.set_xlabel("predicted probability")
+    axc.set_ylabel("traces per bin")
     return _save(fig, path)
 
 

@@ -10,6 +10,9 @@ Data
 Model, training, evaluation
     `OrbitModule` with forecast strategies `DirectForecast`, `AutoregressiveForecast`;
     `train(cfg)` (Hydra config ``conf/train_qrnn.yaml``), `export_checkpoint`, `evaluate`.
+Calibration and evidence for other analyses (issue 15)
+    `coupling_probability` (calibrated probability per trace / set-point, `CouplingEvidence`),
+    `CouplingCalibration`, `PlattCalibrator`, `IsotonicCalibrator`, `flag_threshold`.
 Coupling, inference, interpretation
     `CouplingFlag`, `trace_scores`, `sweet_spot_interval`, `interval_iou`, `roc_auc`;
     `infer(trace_path, out_dir)`, `load_module`, `coupling_summary`, `DEFAULT_CHECKPOINT`;
@@ -22,6 +25,12 @@ Submodule and function share a name for `train`, `infer` and `evaluate`; the pac
 is the function (``from afmlearn.qrnn.train import train`` works as well).
 """
 
+from afmlearn.qrnn.calibration import (
+    CouplingCalibration,
+    IsotonicCalibrator,
+    PlattCalibrator,
+    flag_threshold,
+)
 from afmlearn.qrnn.coupling import (
     CouplingFlag,
     interval_iou,
@@ -32,6 +41,7 @@ from afmlearn.qrnn.coupling import (
 from afmlearn.qrnn.data import SweepDataModule, windows_from_trace
 from afmlearn.qrnn.datagen import DatasetSpec, dataset_summary, generate_dataset
 from afmlearn.qrnn.evaluate import evaluate
+from afmlearn.qrnn.evidence import CouplingEvidence, coupling_probability
 from afmlearn.qrnn.forecast import AbstractForecast, AutoregressiveForecast, DirectForecast
 from afmlearn.qrnn.infer import (
     DEFAULT_CHECKPOINT,
@@ -80,6 +90,8 @@ __all__ = [
     "AbstractSequenceNet",
     "AutoregressiveForecast",
     "ChunkedScan",
+    "CouplingCalibration",
+    "CouplingEvidence",
     "CouplingFlag",
     "DatasetSpec",
     "DirectForecast",
@@ -88,8 +100,10 @@ __all__ = [
     "FPooling",
     "GRUNet",
     "IFOPooling",
+    "IsotonicCalibrator",
     "LSTMNet",
     "OrbitModule",
+    "PlattCalibrator",
     "QRNNCarry",
     "QRNNLayer",
     "QRNNNet",
@@ -97,10 +111,12 @@ __all__ = [
     "SweepDataModule",
     "SweepInterpretation",
     "UnitRanking",
+    "coupling_probability",
     "coupling_summary",
     "dataset_summary",
     "evaluate",
     "export_checkpoint",
+    "flag_threshold",
     "fo_pool",
     "fo_pool_reference",
     "generate_dataset",

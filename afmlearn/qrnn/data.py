@@ -234,7 +234,8 @@ class SweepDataModule(L.LightningDataModule):
         return self._sets[stage]
 
     def sweeps(self, stage: str) -> list[dict[str, Any]]:
-        """Per-sweep labels of ``stage`` for sweet-spot evaluation.
+        """Per-sweep labels of ``stage`` for sweet-spot evaluation (sweep directions only:
+        set-point series have no frequency interval).
 
         Returns
         -------
@@ -255,6 +256,8 @@ def _sweep_records(pts: dict[str, NDArray], swp: dict[str, NDArray], ids: NDArra
 
     out = []
     for s in np.flatnonzero(np.isin(swp["cantilever_id"], ids)):
+        if DIRECTIONS[int(swp["direction"][s])] == "series":   # no frequency interval
+            continue
         rows = np.flatnonzero(pts["sweep_id"] == s)
         rows = rows[np.argsort(pts["point_index"][rows])]
         lo, hi = float(swp["sweet_lo"][s]), float(swp["sweet_hi"][s])

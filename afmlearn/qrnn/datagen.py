@@ -107,12 +107,15 @@ from scipy.interpolate import CubicSpline
 from simulator import RK4, BaseExcitation, Cantilever, SensorChain, Sweep, System, TipExcitation
 from simulator.forces import DMT
 from simulator.labels import coupling_strength, lock_in
+from simulator.scenarios.spectroscopy import Spectroscopy
+from simulator.sensor import GaussianNoise, LowPass, Quantizer
 
 __all__ = [
     "DatasetSpec",
     "GENERATOR_VERSION",
     "FAMILIES",
     "DIRECTIONS",
+    "EXCITATIONS",
     "N_FEATURES",
     "generate_dataset",
     "input_features",
@@ -125,11 +128,13 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: bump when the generator's output changes for the same spec (part of the cache hash)
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2
 #: family codes stored in ``cantilevers/family`` and ``sweeps/family``
-FAMILIES: tuple[str, ...] = ("sweet_spot", "rectangular")
-#: direction codes stored in ``sweeps/direction``
-DIRECTIONS: tuple[str, ...] = ("forward", "reverse")
+FAMILIES: tuple[str, ...] = ("sweet_spot", "rectangular", "nonuniform")
+#: excitation codes stored in ``cantilevers/excitation`` and ``sweeps/excitation``
+EXCITATIONS: tuple[str, ...] = ("base", "tip")
+#: record codes stored in ``sweeps/direction``: a sweep direction, or a set-point series
+DIRECTIONS: tuple[str, ...] = ("forward", "reverse", "series")
 #: number of input channels per time step (normalised deflection, detuning, scale)
 N_FEATURES = 3
 #: scale factor of the detuning channel ``DETUNING_GAIN * (Omega - 1)``
@@ -224,10 +229,26 @@ class DatasetSpec:
     sweet_max_gap: int = 2
     sweet_min_points: int = 2
     seed: int = 0
+    nonuniform_fraction: float = 0.0
+    tip_fraction: float = 0.5
+    sweet_spot_tip_fraction: float = 0.0
+    exact_six_fraction: float = 0.0
+    ratio2_range: tuple[float, ...] = ()
+    series_per_cantilever: int = 0
+    n_setpoints: int = 6
+    setpoint_range: tuple[float, float] = (0.3, 0.95)
+    series_free_amplitude_range: tuple[float, float] = (0.6, 2.0)
+    series_omega_range: tuple[float, float] = (0.99, 1.01)
+    series_periods: int = 10
+    series_settle_q: float = 1.5
+    sim_samples_choices: tuple[int, ...] = ()
+    lowpass_range: tuple[float, ...] = ()
+    adc_bits: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
-        ints = {"n_cantilevers": 3, "sweeps_per_cantilever": 1, "n_points": 4,
+        ints = {"n_cantilevers": 3, "sweeps_per_cantilever": 0, "n_points": 4,
+                "series_per_cantilever": 0, "n_setpoints": 1, "series_periods": 3,
                 "sim_samples_per_period": 40, "steps_per_period": 30, "samples_per_period": 16,
                 "target_periods": 1, "windows_per_point": 1, "sweet_max_gap": 0,
                 "sweet_min_points": 1, "seed": 0}
@@ -243,8 +264,35 @@ class DatasetSpec:
         if not modes or any(m not in (1, 2, 3) for m in modes):
             raise ValueError(f"modes must be a non-empty sequence of 1, 2, 3, got {self.modes!r}")
         set_(self, "modes", modes)
-        for name in ("sweet_spot_fraction", "near_six_fraction"):
+        for name in ("sweet_spot_fraction", "near_six_fraction", "nonuniform_fraction",
+                     "tip_fraction", "sweet_spot_tip_fraction", "exact_six_fraction"):
             set_(self, name, _in_range(name, getattr(self, name), 0.0, 1.0))
+        if self.sweet_spot_fraction + self.nonuniform_fraction > 1.0 + 1e-12:
+            raise ValueError("sweet_spot_fraction + nonuniform_fraction must be <= 1, got "
+                             f"{self.sweet_spot_fraction} + {self.nonuniform_fraction}")
+        if self.sweeps_per_cantilever + self.series_per_cantilever < 1:
+            raise ValueError("sweeps_per_cantilever + series_per_cantilever must be >= 1")
+        if self.series_per_cantilever and self.series_periods < self.target_periods + 2:
+            raise ValueError(f"series_periods must be >= target_periods + 2 = "
+                             f"{self.target_periods + 2}, got {self.series_periods!r}")
+        for name in ("ratio2_range", "lowpass_range"):
+            v = tuple(float(r) for r in np.atleast_1d(getattr(self, name)))
+            if v:
+                set_(self, name, _pair(name, v))
+            else:
+                set_(self, name, ())
+        spp = tuple(int(v) for v in np.atleast_1d(self.sim_samples_choices))
+        if any(v < 40 for v in spp):
+            raise ValueError(f"sim_samples_choices must hold integers >= 40, got {spp!r}")
+        set_(self, "sim_samples_choices", spp)
+        bits = tuple(int(v) for v in np.atleast_1d(self.adc_bits))
+        if any(not 8 <= v <= 24 for v in bits):
+            raise ValueError(f"adc_bits must hold integers in [8, 24], got {bits!r}")
+        set_(self, "adc_bits", bits)
+        for name in ("setpoint_range", "series_free_amplitude_range", "series_omega_range"):
+            set_(self, name, _pair(name, getattr(self, name)))
+        set_(self, "series_settle_q", _in_range("series_settle_q", self.series_settle_q, 0.0,
+                                                math.inf))
         away = tuple(float(r) for r in np.atleast_1d(self.away_ratios))
         if not away or any(not (math.isfinite(r) and r > 1.0) for r in away):
             raise ValueError(f"away_ratios must hold values > 1, got {self.away_ratios!r}")
@@ -287,13 +335,16 @@ class DatasetSpec:
 
     @property
     def n_sweeps(self) -> int:
-        """Sweep directions in total (2 per sweep)."""
-        return 2 * self.n_cantilevers * self.sweeps_per_cantilever
+        """Records in total: sweep directions (2 per sweep) and set-point series."""
+        return self.n_cantilevers * (2 * self.sweeps_per_cantilever
+                                     + self.series_per_cantilever)
 
     @property
     def n_windows(self) -> int:
         """Windows in the dataset."""
-        return self.n_sweeps * self.n_points * self.windows_per_point
+        per_cantilever = (2 * self.sweeps_per_cantilever * self.n_points
+                          + self.series_per_cantilever * self.n_setpoints)
+        return self.n_cantilevers * per_cantilever * self.windows_per_point
 
 
 def _in_range(name: str, value: Any, low: float, high: float, *, low_open: bool = False,
@@ -453,46 +504,122 @@ def _loguniform(rng: np.random.Generator, lo: float, hi: float) -> float:
     return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
 
+def _draw_ratio2(spec: DatasetSpec, rng: np.random.Generator) -> float:
+    """Mode-2 frequency ratio: near 6:1 (exactly 6 for a share), else away or in a range."""
+    if rng.uniform() < spec.near_six_fraction:
+        if rng.uniform() < spec.exact_six_fraction:
+            return 6.0
+        return 6.0 * math.sqrt(1.0 + rng.uniform(-0.03, 0.03))
+    if spec.ratio2_range:
+        return float(rng.uniform(*spec.ratio2_range))
+    return float(rng.choice(spec.away_ratios))
+
+
+def _family(spec: DatasetSpec, index: int) -> tuple[str, int]:
+    """Family of cantilever ``index`` and its position within the family."""
+    n_sweet = int(round(spec.sweet_spot_fraction * spec.n_cantilevers))
+    n_nonuniform = int(round(spec.nonuniform_fraction * spec.n_cantilevers))
+    if index < n_sweet:
+        return "sweet_spot", index
+    if index < n_sweet + n_nonuniform:
+        return "nonuniform", index - n_sweet
+    return "rectangular", index - n_sweet - n_nonuniform
+
+
 def _draw_cantilever(spec: DatasetSpec, index: int, rng: np.random.Generator
                      ) -> tuple[dict[str, Any], Cantilever, DMT, type]:
-    """Family, parameters, cantilever, force and excitation class of cantilever ``index``."""
-    n_sweet = int(round(spec.sweet_spot_fraction * spec.n_cantilevers))
-    if index < n_sweet:
+    """Family, parameters, cantilever, force and excitation class of cantilever ``index``.
+
+    Families: ``sweet_spot`` (Table 3.B.1 fit; base excitation, tip for a share
+    ``sweet_spot_tip_fraction``), ``rectangular`` (beam theory: mode 3 at 17.55, mode shapes of
+    a uniform beam) and ``nonuniform`` (a beam with a tip mass / taper: mode 3 at 14 ... 16.5,
+    other modal force gains and base participations, wider contact parameters).
+    """
+    family, k = _family(spec, index)
+    if family == "sweet_spot":
         k2 = 36.0 * (1.0 + rng.uniform(-0.03, 0.03))
         d = np.array(_TABLE_DAMPING) * rng.uniform(0.8, 1.25, 2)
         dc = np.array(_TABLE_CONTACT_DAMPING) * rng.uniform(0.8, 1.25, 2)
         cl = Cantilever(stiffness=[1.0, k2], damping=d, contact_damping=dc,
                         base_participation=_TABLE_BASE, force_gain=[1.0, _TABLE_GAIN])
         force = DMT(a0=0.2, vdw=6e-4 * rng.uniform(0.7, 1.2), stiffness=10.5, exponent=1.5)
-        params = {"family": "sweet_spot", "n_modes": 2, "ratio2": math.sqrt(k2),
-                  "cantilever": cl.to_dict(), "force": force.to_dict(), "excitation": "base"}
-        return params, cl, force, BaseExcitation
-    n_modes = spec.modes[(index - n_sweet) % len(spec.modes)]
+        exc = TipExcitation if rng.uniform() < spec.sweet_spot_tip_fraction else BaseExcitation
+        params = {"family": family, "n_modes": 2, "ratio2": math.sqrt(k2),
+                  "cantilever": cl.to_dict(), "force": force.to_dict(), "excitation": exc.kind}
+        return params, cl, force, exc
+    n_modes = spec.modes[k % len(spec.modes)]
     q1 = _loguniform(rng, *spec.q_range)
     ratios = [1.0]
     if n_modes >= 2:
-        if rng.uniform() < spec.near_six_fraction:
-            ratios.append(6.0 * math.sqrt(1.0 + rng.uniform(-0.03, 0.03)))
-        else:
-            ratios.append(float(rng.choice(spec.away_ratios)))
+        ratios.append(_draw_ratio2(spec, rng))
     if n_modes == 3:
-        ratios.append(17.55 * (1.0 + rng.uniform(-0.02, 0.02)))
+        ratios.append(17.55 * (1.0 + rng.uniform(-0.02, 0.02)) if family == "rectangular"
+                      else float(rng.uniform(14.0, 16.5)))
     qh = [_loguniform(rng, *spec.higher_q_range) for _ in range(n_modes - 1)]
     qc = [q1 / rng.uniform(1.5, 2.5)] + [q / rng.uniform(4.0, 16.0) for q in qh]
-    cl = Cantilever.rectangular(n_modes=n_modes, quality_factor=q1, higher_quality_factors=qh,
-                                contact_quality_factors=qc, frequency_ratios=ratios)
-    force = DMT(a0=0.2, vdw=_loguniform(rng, 1e-4, 8e-4), stiffness=_loguniform(rng, 6.0, 20.0),
-                exponent=1.5)
-    exc = TipExcitation if rng.uniform() < 0.5 else BaseExcitation
-    params = {"family": "rectangular", "n_modes": n_modes,
+    if family == "rectangular":
+        cl = Cantilever.rectangular(n_modes=n_modes, quality_factor=q1,
+                                    higher_quality_factors=qh, contact_quality_factors=qc,
+                                    frequency_ratios=ratios)
+        force = DMT(a0=0.2, vdw=_loguniform(rng, 1e-4, 8e-4),
+                    stiffness=_loguniform(rng, 6.0, 20.0), exponent=1.5)
+    else:
+        r = np.asarray(ratios)
+        q = np.asarray([q1, *qh])
+        gain = [1.0, rng.uniform(0.7, 1.5), rng.uniform(0.6, 1.3)][:n_modes]
+        base = [rng.uniform(1.3, 1.8), -rng.uniform(0.5, 1.2), rng.uniform(0.3, 0.7)][:n_modes]
+        cl = Cantilever(stiffness=r**2, damping=r / q, contact_damping=r / np.asarray(qc),
+                        base_participation=base, force_gain=gain)
+        force = DMT(a0=float(rng.uniform(0.12, 0.3)), vdw=_loguniform(rng, 5e-5, 1.2e-3),
+                    stiffness=_loguniform(rng, 4.0, 30.0), exponent=1.5)
+    exc = TipExcitation if rng.uniform() < spec.tip_fraction else BaseExcitation
+    params = {"family": family, "n_modes": n_modes,
               "ratio2": ratios[1] if n_modes >= 2 else 0.0, "cantilever": cl.to_dict(),
               "force": force.to_dict(), "excitation": exc.kind}
     return params, cl, force, exc
 
 
+def _sensor(spec: DatasetSpec, rng: np.random.Generator, spp: float
+            ) -> tuple[SensorChain, dict[str, float]]:
+    """Detector chain of one record: noise, optional low-pass and ADC (drawn per record).
+
+    ``spp``: raw samples per period of ``f0`` (the low-pass cut-off stays below 0.45 of the
+    Nyquist frequency ``spp / 2``).
+    """
+    noise = float(rng.choice(spec.noise_levels))
+    stages: list[Any] = [GaussianNoise(level=noise)]
+    info = {"noise_level": noise, "lowpass_f0": 0.0, "adc_bits": 0.0}
+    if spec.lowpass_range:
+        cutoff = min(_loguniform(rng, *spec.lowpass_range), 0.45 * spp / 2.0)
+        stages.append(LowPass(cutoff=cutoff, order=2))
+        info["lowpass_f0"] = cutoff
+    if spec.adc_bits:
+        bits = int(rng.choice(spec.adc_bits))
+        stages.append(Quantizer(bits=bits, full_scale=3.0))
+        info["adc_bits"] = float(bits)
+    return SensorChain(stages, seed=int(rng.integers(2**31))), info
+
+
+def _measure(sensor: SensorChain, x: NDArray[np.float64], *, x_ref: float, dt: float,
+             period: float) -> NDArray[np.float64]:
+    """``sensor(x)`` without the start-up transient of a filter: the record is preceded by a
+    copy of its first two drive periods (``period`` samples each; steady orbits repeat), which
+    is cut off again."""
+    n_pad = min(int(round(2.0 * period)), x.size)
+    y = sensor(np.concatenate([x[:n_pad], x]), x_ref=x_ref, dt=dt)
+    return y[n_pad:]
+
+
+def _spp(spec: DatasetSpec, rng: np.random.Generator) -> int:
+    if spec.sim_samples_choices:
+        return int(rng.choice(spec.sim_samples_choices))
+    return spec.sim_samples_per_period
+
+
 # ---------------------------------------------------------------------------- one cantilever
 def _simulate_cantilever(spec: DatasetSpec, index: int) -> dict[str, Any]:
-    """All sweeps of cantilever ``index``: per-point labels and resampled windows."""
+    """All records of cantilever ``index`` (sweeps, then set-point series): per-point labels
+    and resampled windows."""
     rng = np.random.default_rng([spec.seed, index])
     params, cl, force, exc_cls = _draw_cantilever(spec, index, rng)
     p_out = spec.samples_per_period
@@ -501,61 +628,102 @@ def _simulate_cantilever(spec: DatasetSpec, index: int) -> dict[str, Any]:
         "omega", "sweep", "point_index", "coupling", "shares", "contact_fraction", "min_gap",
         "amplitude", "harmonic6")}
     windows: dict[str, list] = {k: [] for k in ("u", "omega", "scale", "offset", "point")}
-    sweeps: dict[str, list] = {k: [] for k in ("direction", "free_amplitude", "noise_level")}
+    sweeps: dict[str, list] = {k: [] for k in ("direction", "free_amplitude", "noise_level",
+                                                "samples_per_period", "lowpass_f0", "adc_bits")}
+
+    def add_point(q, phase, dt, omega, labels, x_meas, row, k, gap):
+        var = q.var(axis=1)
+        shares = np.zeros(3)
+        shares[: q.shape[0]] = var / var.sum() if var.sum() > 0 else 0.0
+        x_true = q.sum(axis=0)
+        n_whole = int(math.floor(x_true.size * dt * omega / (2 * math.pi))
+                      * (2 * math.pi / omega) / dt)
+        x1 = abs(lock_in(x_true[:n_whole], phase[:n_whole], 1))
+        x6 = abs(lock_in(x_true[:n_whole], phase[:n_whole], 6))
+        n_point = len(points["omega"])
+        for key, val in (("omega", omega), ("sweep", row), ("point_index", k),
+                         ("coupling", coupling_strength(q)), ("shares", shares),
+                         ("contact_fraction", labels["contact_fraction"]),
+                         ("min_gap", labels["min_gap"]), ("amplitude", labels["amplitude"]),
+                         ("harmonic6", x6 / x1 if x1 > 0 else 0.0)):
+            points[key].append(val)
+        period = 2.0 * math.pi / (omega * dt)
+        room = x_meas.size - 1 - n_win_periods * period
+        assert room > 0, "record too short for the window"
+        starts = rng.uniform(0.0, room, spec.windows_per_point)
+        w = resample_windows(x_meas, period=period, starts=starts, n_periods=n_win_periods,
+                             samples_per_period=p_out)
+        u, offset, scale = normalise_windows(w, p_out)
+        windows["u"].append(u.astype(np.float32))
+        windows["omega"].append(np.full(starts.size, omega))
+        windows["scale"].append(scale / gap)  # units of the rest gap
+        windows["offset"].append(offset)
+        windows["point"].append(np.full(starts.size, n_point))
+
+    def add_record(direction, free_amp, info, spp):
+        sweeps["direction"].append(DIRECTIONS.index(direction))
+        sweeps["free_amplitude"].append(free_amp)
+        sweeps["samples_per_period"].append(float(spp))
+        for key in ("noise_level", "lowpass_f0", "adc_bits"):
+            sweeps[key].append(info[key])
+
+    def sweet_spot_free_amplitude(omega: float) -> float:
+        return BaseExcitation(amplitude=_TABLE_DITHER * rng.uniform(0.9, 1.1)
+                              ).free_amplitude(cl, omega)
+
     n_rows = 0
     for _ in range(spec.sweeps_per_cantilever):
-        if params["family"] == "sweet_spot":
+        if params["family"] == "sweet_spot" and exc_cls is BaseExcitation:
             exc = BaseExcitation(amplitude=_TABLE_DITHER * rng.uniform(0.9, 1.1))
+        elif params["family"] == "sweet_spot":
+            exc = exc_cls.for_free_amplitude(cl, 1.0, sweet_spot_free_amplitude(1.0))
         else:
             exc = exc_cls.for_free_amplitude(cl, 1.0, rng.uniform(*spec.free_amplitude_range))
         free_amp = exc.free_amplitude(cl, 1.0)
-        noise = float(rng.choice(spec.noise_levels))
-        sensor = SensorChain.default(noise_level=noise, seed=int(rng.integers(2**31)))
-        spp = spec.sim_samples_per_period
+        spp = _spp(spec, rng)
+        sensor, info = _sensor(spec, rng, spp)
         sweep = Sweep(omega_start=spec.omega_start, omega_stop=spec.omega_stop,
                       n_points=spec.n_points, samples_per_point=spec.record_periods * spp,
                       settle_samples=int(round(spec.settle_periods * spp)), direction="both",
                       samples_per_period=spp, settle_periods=spec.initial_settle_periods,
                       integrator=RK4(steps_per_period=spec.steps_per_period))
         system = System(cl, force, exc)
-        for direction in DIRECTIONS:
-            sweeps["direction"].append(DIRECTIONS.index(direction))
-            sweeps["free_amplitude"].append(free_amp)
-            sweeps["noise_level"].append(noise)
+        for direction in DIRECTIONS[:2]:
+            add_record(direction, free_amp, info, spp)
         for pt in sweep.iter_points(system):
-            q = pt.q
-            row = n_rows + DIRECTIONS.index(pt.direction)
-            k = pt.row % spec.n_points
-            var = q.var(axis=1)
-            shares = np.zeros(3)
-            shares[: q.shape[0]] = var / var.sum() if var.sum() > 0 else 0.0
-            x_true = q.sum(axis=0)
-            n_whole = int(math.floor(x_true.size * sweep.dt * pt.omega / (2 * math.pi))
-                          * (2 * math.pi / pt.omega) / sweep.dt)
-            x1 = abs(lock_in(x_true[:n_whole], pt.phase[:n_whole], 1))
-            x6 = abs(lock_in(x_true[:n_whole], pt.phase[:n_whole], 6))
-            n_point = len(points["omega"])
-            for key, val in (("omega", pt.omega), ("sweep", row), ("point_index", k),
-                             ("coupling", coupling_strength(q)), ("shares", shares),
-                             ("contact_fraction", pt.labels["contact_fraction"]),
-                             ("min_gap", pt.labels["min_gap"]),
-                             ("amplitude", pt.labels["amplitude"]),
-                             ("harmonic6", x6 / x1 if x1 > 0 else 0.0)):
-                points[key].append(val)
-            x_meas = sensor(x_true, x_ref=free_amp, dt=sweep.dt)
-            period = 2.0 * math.pi / (pt.omega * sweep.dt)
-            room = x_meas.size - 1 - n_win_periods * period
-            assert room > 0, "record_periods too short for the window"
-            starts = rng.uniform(0.0, room, spec.windows_per_point)
-            w = resample_windows(x_meas, period=period, starts=starts, n_periods=n_win_periods,
-                                 samples_per_period=p_out)
-            u, offset, scale = normalise_windows(w, p_out)
-            windows["u"].append(u.astype(np.float32))
-            windows["omega"].append(np.full(starts.size, pt.omega))
-            windows["scale"].append(scale)  # units of the rest gap (L_ref = 1)
-            windows["offset"].append(offset)
-            windows["point"].append(np.full(starts.size, n_point))
-        n_rows += len(DIRECTIONS)
+            x_meas = _measure(sensor, pt.q.sum(axis=0), x_ref=free_amp, dt=sweep.dt,
+                              period=2.0 * math.pi / (pt.omega * sweep.dt))
+            add_point(pt.q, pt.phase, sweep.dt, pt.omega, pt.labels, x_meas,
+                      n_rows + DIRECTIONS.index(pt.direction), pt.row % spec.n_points, 1.0)
+        n_rows += 2
+    q1 = float(cl.quality_factors[0])
+    for _ in range(spec.series_per_cantilever):
+        omega = float(rng.uniform(*spec.series_omega_range))
+        if params["family"] == "sweet_spot" and exc_cls is BaseExcitation:
+            exc = BaseExcitation(amplitude=_TABLE_DITHER * rng.uniform(0.9, 1.1))
+        elif params["family"] == "sweet_spot":
+            exc = exc_cls.for_free_amplitude(cl, omega, sweet_spot_free_amplitude(omega))
+        else:
+            exc = exc_cls.for_free_amplitude(cl, omega,
+                                             rng.uniform(*spec.series_free_amplitude_range))
+        free_amp = exc.free_amplitude(cl, omega)
+        spp = _spp(spec, rng)                     # samples per drive period here
+        sensor, info = _sensor(spec, rng, spp * omega)
+        ratios = np.sort(rng.uniform(*spec.setpoint_range, spec.n_setpoints))[::-1]
+        scen = Spectroscopy(omega=omega, gap_ratios=ratios, n_periods=spec.series_periods,
+                            settle_periods=spec.series_settle_q * q1, samples_per_period=spp,
+                            integrator=RK4(steps_per_period=spec.steps_per_period))
+        res = scen.run(System(cl, force, exc))
+        gaps = scen.rest_gaps(free_amp)
+        add_record("series", free_amp, info, spp)
+        for i in range(gaps.size):
+            labels = {key: res.labels[key][i] for key in ("contact_fraction", "min_gap",
+                                                           "amplitude")}
+            x_meas = _measure(sensor, res.q[i].sum(axis=0), x_ref=free_amp, dt=res.dt,
+                              period=float(spp))
+            add_point(res.q[i], res.phase[i], res.dt, omega, labels, x_meas, n_rows, i,
+                      float(gaps[i]))
+        n_rows += 1
     out: dict[str, Any] = {"params_json": json.dumps(params)}
     for key, vals in points.items():
         out["points/" + key] = np.asarray(vals)
@@ -566,9 +734,13 @@ def _simulate_cantilever(spec: DatasetSpec, index: int) -> dict[str, Any]:
     return out
 
 
-def _label_points(spec: DatasetSpec, points: dict[str, NDArray], n_sweeps: int
+def _label_points(spec: DatasetSpec, points: dict[str, NDArray], direction: NDArray
                   ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """``coupled``, ``sweet`` per point and the sweet interval ``(lo, hi)`` per sweep."""
+    """``coupled``, ``sweet`` per point and the sweet interval ``(lo, hi)`` per sweep.
+
+    A set-point series (one drive frequency) has no interval; its ``sweet`` points are the
+    candidates themselves (coupled and tapping)."""
+    n_sweeps = direction.size
     coupled = points["coupling"] > spec.coupling_threshold
     cand = coupled & (points["contact_fraction"] > 0.0)
     sweet = np.zeros_like(coupled)
@@ -576,6 +748,9 @@ def _label_points(spec: DatasetSpec, points: dict[str, NDArray], n_sweeps: int
     hi = np.full(n_sweeps, np.nan)
     for s in range(n_sweeps):
         rows = np.flatnonzero(points["sweep_id"] == s)
+        if DIRECTIONS[int(direction[s])] == "series":
+            sweet[rows] = cand[rows]
+            continue
         rows = rows[np.argsort(points["point_index"][rows])]
         interval, mask = sweet_interval(points["omega"][rows], cand[rows],
                                         max_gap=spec.sweet_max_gap,
@@ -687,13 +862,15 @@ def _assemble(path: Path, spec: DatasetSpec, parts: list[dict[str, Any]],
     pts = {k: np.concatenate(v) for k, v in points.items()}
     win = {k: np.concatenate(v) for k, v in windows.items()}
     swp = {k: np.concatenate(v) for k, v in sweeps.items()}
-    coupled, sweet, lo, hi = _label_points(spec, pts, n_sweeps)
+    coupled, sweet, lo, hi = _label_points(spec, pts, swp["direction"])
     pts["coupled"], pts["sweet"] = coupled, sweet
     swp["cantilever_id"] = np.concatenate(cant_ids_s)
     n_modes = np.array([p["n_modes"] for p in params])
     family = np.array([FAMILIES.index(p["family"]) for p in params])
+    excitation = np.array([EXCITATIONS.index(p["excitation"]) for p in params])
     swp["n_modes"] = n_modes[swp["cantilever_id"]]
     swp["family"] = family[swp["cantilever_id"]]
+    swp["excitation"] = excitation[swp["cantilever_id"]]
     swp["sweet_lo"], swp["sweet_hi"] = lo, hi
     pidx = win["point"]
     for key in ("cantilever_id", "sweep_id", "point_index", "coupling", "coupled", "sweet",
@@ -720,6 +897,7 @@ def _assemble(path: Path, spec: DatasetSpec, parts: list[dict[str, Any]],
             g = fh.create_group("cantilevers")
             g.create_dataset("n_modes", data=n_modes)
             g.create_dataset("family", data=family)
+            g.create_dataset("excitation", data=excitation)
             g.create_dataset("ratio2", data=np.array([p["ratio2"] for p in params]))
             g.attrs["params_json"] = json.dumps(params)
         os.replace(tmp, path)

@@ -21,6 +21,7 @@ as documented in :mod:`afmlearn.qrnn.data`) and returns
     Mean over sweep directions of the IoU between the predicted sweet-spot interval (from the
     per-point sweet scores) and the labelled one (longest run of labelled points); both empty
     counts 1. ``sweet_iou_labelled`` averages only directions with a labelled sweet spot.
+    Set-point series (one drive frequency) have no interval and are left out.
 """
 
 from __future__ import annotations
@@ -40,7 +41,8 @@ from afmlearn.qrnn.coupling import (
     trace_scores,
 )
 
-__all__ = ["evaluate", "collect", "nrmse_per_period", "valid_prediction_time"]
+__all__ = ["evaluate", "collect", "nrmse_per_period", "trace_table",
+           "valid_prediction_time"]
 
 
 def nrmse_per_period(pred: NDArray[np.float64], true: NDArray[np.float64], *, horizon: int
@@ -97,6 +99,26 @@ def collect(module: Any, dataloader: Iterable[dict[str, torch.Tensor]]) -> dict[
     return {k: np.concatenate(v) for k, v in out.items()}
 
 
+def trace_table(d: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per-trace (per sweep point / set-point) raw scores and labels from `collect` output.
+
+    Returns
+    -------
+    dict
+        ``raw_score`` (mean window coupling score), ``coupled`` (bool), ``sweet_score``,
+        ``sweet`` (bool), ``omega``, ``sweep_id``, ``point`` -- shape (n_traces,) each.
+    """
+    key = d["sweep_id"].astype(np.int64) * 1_000_003 + d["point"].astype(np.int64)
+    _, score = trace_scores(d["coupled_score"], key)
+    _, label = trace_scores(d["coupled"].astype(float), key)
+    _, sweet_score = trace_scores(d["sweet_score"], key)
+    _, sweet_label = trace_scores(d["sweet"].astype(float), key)
+    first = np.unique(key, return_index=True)[1]
+    return {"raw_score": score, "coupled": label > 0.5, "sweet_score": sweet_score,
+            "sweet": sweet_label > 0.5, "omega": d["omega"][first].astype(float),
+            "sweep_id": d["sweep_id"][first], "point": d["point"][first]}
+
+
 def evaluate(module: Any, dataloader: Iterable[dict[str, torch.Tensor]], *,
              threshold: float = 0.5, vpt_threshold: float = 0.1) -> dict[str, float]:
     """Held-out metrics (see the module docstring) of ``module`` on ``dataloader``."""
@@ -130,6 +152,8 @@ def evaluate(module: Any, dataloader: Iterable[dict[str, torch.Tensor]], *,
     for s in np.unique(sweep):
         sel = np.flatnonzero(sweep == s)
         sel = sel[np.argsort(point[sel], kind="stable")]
+        if np.ptp(omega[sel]) == 0.0:      # a set-point series: no frequency interval
+            continue
         for part in directions(omega[sel]):
             idx = sel[part]
             lab = sweet_spot_interval(omega[idx], sweet_label[idx])

@@ -42,12 +42,14 @@ from hydra.utils import instantiate
 
 from afmlearn.io import Trace, read_trace
 from afmlearn.preprocess.checks import check_trace
+from afmlearn.qrnn.calibration import CouplingCalibration
 from afmlearn.qrnn.coupling import directions, sweet_spot_interval, trace_scores
 from afmlearn.qrnn.data import windows_from_trace
 from afmlearn.qrnn.evaluate import nrmse_per_period
 from afmlearn.qrnn.module import CHECKPOINT_KEY, OrbitModule
 
-__all__ = ["DEFAULT_CHECKPOINT", "load_module", "predict_trace", "infer", "coupling_summary"]
+__all__ = ["DEFAULT_CHECKPOINT", "calibration_of", "load_module", "predict_trace", "infer",
+           "coupling_summary"]
 
 #: checkpoint shipped with the package (trained by ``experiment=qrnn_default``)
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "qrnn_default.ckpt"
@@ -92,6 +94,8 @@ def load_module(checkpoint: str | os.PathLike[str] | None = None
     run = dict(meta["run"])
     if "metrics" in meta:
         run["metrics"] = meta["metrics"]
+    if meta.get("calibration"):
+        run["calibration"] = meta["calibration"]
     model_cfg = run["config"]["model"]
     net = instantiate(model_cfg["net"], input_size=int(run["input_size"]))
     module = instantiate({k: v for k, v in model_cfg.items() if k not in _NOT_FOR_INFERENCE},
@@ -108,9 +112,16 @@ def _direction_name(omega: np.ndarray) -> str:
     return "forward" if omega[-1] > omega[0] else "reverse"
 
 
+def calibration_of(run: dict[str, Any]) -> CouplingCalibration | None:
+    """The checkpoint's coupling calibration (None for an uncalibrated checkpoint)."""
+    data = run.get("calibration")
+    return CouplingCalibration.from_dict(data) if data else None
+
+
 def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
-                  run: dict[str, Any], *, threshold: float = 0.5) -> dict[str, Any]:
-    """Scores, flags, sweet-spot intervals and forecasts of one trace or sweep (no files).
+                  run: dict[str, Any], *, threshold: float | None = None) -> dict[str, Any]:
+    """Scores, flags, sweet-spot intervals and forecasts of one trace, sweep or set-point
+    series (no files).
 
     Parameters
     ----------
@@ -118,17 +129,23 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
         A recording (read without labels when a path).
     module, run : OrbitModule, dict
         From :func:`load_module`.
-    threshold : float
-        Flag threshold in (0, 1).
+    threshold : float, optional
+        Flag threshold in (0, 1) on the trace score. Default: the checkpoint's calibrated
+        threshold (chosen for its stated false-flag rate), or 0.5 for an uncalibrated one.
 
     Returns
     -------
     dict
         ``summary`` (JSON-ready, the body of ``coupling.json``) and ``arrays``
         (``windows`` of :func:`windows_from_trace`, ``pred`` (N, horizon P) normalised forecast,
-        ``coupled``, ``sweet`` (N,) window scores).
+        ``coupled``, ``sweet`` (N,) window scores). A trace's ``score`` is the calibrated
+        probability of coupling when the checkpoint is calibrated (``raw_score``: the mean
+        window score); the sweet-spot interval uses the raw sweet score at 0.5.
     """
-    if not 0.0 < float(threshold) < 1.0:
+    cal = calibration_of(run)
+    if threshold is None:
+        threshold = cal.threshold if cal is not None else 0.5
+    elif not 0.0 < float(threshold) < 1.0:
         raise ValueError(f"threshold must be in (0, 1), got {threshold!r}")
     if not isinstance(trace, Trace):
         trace = read_trace(trace)          # labels=False: /labels is never opened
@@ -143,7 +160,8 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
     out = module.predict_windows(torch.from_numpy(np.ascontiguousarray(win["x"])))
     pred = out["y"].numpy().astype(float)
     coupled, sweet = out["coupled"].numpy(), out["sweet"].numpy()
-    rows, score = trace_scores(coupled, win["row"])
+    rows, raw = trace_scores(coupled, win["row"])
+    score = cal.probability(raw) if cal is not None else raw
     _, sweet_score = trace_scores(sweet, win["row"])
     err = nrmse_per_period(pred, win["y"].astype(float), horizon=horizon)
     f0 = trace.resonance_frequency_hz
@@ -154,12 +172,18 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
         traces.append({
             "row": int(r), "drive_frequency_hz": float(f_rows[r]),
             "omega": float(win["omega_rows"][r]), "score": float(score[i]),
+            "raw_score": float(raw[i]),
             "flag": bool(score[i] >= threshold), "sweet_score": float(sweet_score[i]),
             "n_windows": int(sel.sum()),
             "forecast_nrmse_per_period": [float(v) for v in err[sel].mean(axis=0)],
         })
+        if trace.is_series:
+            traces[-1]["gap_m"] = float(np.asarray(trace.gap_m)[r])
     summary: dict[str, Any] = {
-        "is_sweep": bool(trace.is_sweep), "n_traces": len(traces), "threshold": float(threshold),
+        "is_sweep": bool(trace.is_sweep), "is_series": bool(trace.is_series),
+        "n_traces": len(traces), "threshold": float(threshold),
+        "calibrated": cal is not None,
+        "false_flag_rate": None if cal is None else cal.false_flag_rate,
         "traces": traces,
     }
     if trace.is_sweep:
@@ -167,11 +191,16 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
         spots = []
         for part in directions(f_rows[rows]):
             f, s = f_rows[rows][part], sweet_score[part]
-            iv = sweet_spot_interval(f, s, threshold=threshold)
+            iv = sweet_spot_interval(f, s, threshold=0.5)
             spots.append({"direction": _direction_name(f), "rows": [int(rows[part][0]),
                                                                     int(rows[part][-1])],
                           "interval_hz": None if iv is None else [iv[0], iv[1]]})
         summary["sweet_spot"] = spots
+    elif trace.is_series:
+        summary["flagged_fraction"] = float(np.mean([t["flag"] for t in traces]))
+        summary["score"] = float(np.max(score))
+        summary["flag"] = bool(summary["score"] >= threshold)
+        summary["sweet_spot"] = None
     else:
         summary["score"] = traces[0]["score"]
         summary["flag"] = traces[0]["flag"]
@@ -218,7 +247,7 @@ def _figures(result: dict[str, Any], out: Path, run: dict[str, Any]) -> list[str
 
 
 def infer(trace_path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
-          checkpoint: str | os.PathLike[str] | None = None, threshold: float = 0.5,
+          checkpoint: str | os.PathLike[str] | None = None, threshold: float | None = None,
           figures: bool = True) -> dict[str, Any]:
     """Run the model on a trace file and write ``coupling.json`` (+ figures) into ``out_dir``.
 
@@ -230,8 +259,9 @@ def infer(trace_path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *
         Output folder (created).
     checkpoint : path, optional
         Default: the shipped :data:`DEFAULT_CHECKPOINT`.
-    threshold : float
-        Flag threshold in (0, 1).
+    threshold : float, optional
+        Flag threshold in (0, 1); default: the checkpoint's calibrated threshold (0.5 when
+        uncalibrated).
     figures : bool
         Also write the PNG figures.
 
@@ -260,26 +290,37 @@ def infer(trace_path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *
 
 def coupling_summary(trace: Trace | str | os.PathLike[str], *,
                      checkpoint: str | os.PathLike[str] | None = None,
-                     threshold: float = 0.5) -> str:
+                     threshold: float | None = None) -> str:
     """A few lines for a terminal: coupling score / flag and the sweet spot of a trace or sweep.
 
     Uses the shipped checkpoint unless ``checkpoint`` is given; writes nothing.
     """
     module, run, used = load_module(checkpoint)
     s = predict_trace(trace, module, run, threshold=threshold)["summary"]
+    threshold = s["threshold"]
     name = "shipped checkpoint" if checkpoint is None else used.name
     head = f"QRNN mode-coupling ({type(module.net).__name__}, {name}):"
-    if not s["is_sweep"]:
+    what = "probability" if s["calibrated"] else "score"
+    rule = (f"threshold {threshold:.3g}" + (f" for {s['false_flag_rate']:.0%} false flags"
+                                           if s["calibrated"] else ""))
+    if not s["is_sweep"] and not s["is_series"]:
         t = s["traces"][0]
-        return (f"{head} score {t['score']:.3f} -> "
-                f"{'coupled' if t['flag'] else 'not coupled'} (threshold {threshold:g}), "
+        return (f"{head} {what} {t['score']:.3f} -> "
+                f"{'coupled' if t['flag'] else 'not coupled'} ({rule}), "
                 f"drive {t['drive_frequency_hz'] / 1e3:.3f} kHz")
+    if s["is_series"]:
+        lines = [head]
+        for t in s["traces"]:
+            lines.append(f"  set-point gap {t['gap_m'] * 1e9:.2f} nm: {what} {t['score']:.3f} -> "
+                         f"{'coupled' if t['flag'] else 'not coupled'}")
+        lines.append(f"  ({rule})")
+        return "\n".join(lines)
     lines = [head]
     scores = np.array([t["score"] for t in s["traces"]])
     k = int(np.argmax(scores))
     n_flagged = sum(t["flag"] for t in s["traces"])
     lines.append(f"  {s['n_traces']} sweep points, {n_flagged} flagged coupled "
-                 f"(score >= {threshold:g}); max score {scores[k]:.3f} at "
+                 f"({what} >= {threshold:.3g}); max {what} {scores[k]:.3f} at "
                  f"{s['traces'][k]['drive_frequency_hz'] / 1e3:.3f} kHz")
     for spot in s["sweet_spot"]:
         iv = spot["interval_hz"]

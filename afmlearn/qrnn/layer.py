@@ -162,7 +162,9 @@ class QRNNLayer(nn.Module):
     hidden_size : int
         Number of hidden units ``>= 1``.
     window : int
-        Width ``k >= 2`` of the causal convolution (time steps seen per output).
+        Width ``k >= 1`` of the causal convolution (time steps seen per output; 1: a
+        time-distributed projection, as the upper layers of Merity et al.'s QRNN language
+        model).
     pooling : AbstractPooling
         `FPooling`, `FOPooling` (default) or `IFOPooling`.
     zoneout : float
@@ -174,7 +176,7 @@ class QRNNLayer(nn.Module):
         super().__init__()
         self.input_size = _check_int("input_size", input_size, 1)
         self.hidden_size = _check_int("hidden_size", hidden_size, 1)
-        self.window = _check_int("window", window, 2)
+        self.window = _check_int("window", window, 1)
         pooling = FOPooling() if pooling is None else pooling
         if not isinstance(pooling, AbstractPooling):
             raise ValueError(f"pooling must be an AbstractPooling (FPooling, FOPooling, "
@@ -235,7 +237,8 @@ class QRNNLayer(nn.Module):
         n_batch, n_time = x.shape[:2]
         n_gates, n_hidden = self.pooling.n_gates, self.hidden_size
         xp = self._padded(x, past)  # time-major
-        shifted = torch.cat([xp[j:j + n_time] for j in range(self.window)], dim=-1)
+        shifted = (xp if self.window == 1 else
+                   torch.cat([xp[j:j + n_time] for j in range(self.window)], dim=-1))
         # one matrix product (time * batch, window * input) x (window * input, gates * hidden):
         # rows time-major, every row holds the gates z, f, o, i side by side; the gates are
         # handed on as (batch, time, hidden) views of it (element-wise ops and the scan keep
@@ -318,7 +321,12 @@ class QRNN(nn.Module):
     num_layers : int
         Number of stacked layers ``>= 1``.
     window : int
-        Convolution width ``>= 2`` of every layer.
+        Convolution width ``>= 1`` of the first layer (and of every layer when
+        ``upper_window`` is None).
+    upper_window : int, optional
+        Convolution width ``>= 1`` of layers 2, 3, ...; None: ``window``. ``1`` halves the
+        arithmetic of those layers (window 2 then 1 is the choice of Merity, Keskar, Socher
+        2018, awd-lstm-lm): the first layer already mixes neighbouring samples.
     pooling : AbstractPooling
         Pooling of every layer (`FOPooling` by default).
     zoneout : float
@@ -328,7 +336,8 @@ class QRNN(nn.Module):
     """
 
     def __init__(self, input_size: int, hidden_size: int, *, num_layers: int = 1,
-                 window: int = 2, pooling: AbstractPooling | None = None,
+                 window: int = 2, upper_window: int | None = None,
+                 pooling: AbstractPooling | None = None,
                  zoneout: float = 0.0, dropout: float = 0.0) -> None:
         super().__init__()
         self.input_size = _check_int("input_size", input_size, 1)
@@ -336,7 +345,8 @@ class QRNN(nn.Module):
         self.num_layers = _check_int("num_layers", num_layers, 1)
         self.dropout = _check_prob("dropout", dropout)
         self.layers = nn.ModuleList(
-            QRNNLayer(input_size if k == 0 else hidden_size, hidden_size, window=window,
+            QRNNLayer(input_size if k == 0 else hidden_size, hidden_size,
+                      window=window if k == 0 or upper_window is None else upper_window,
                       pooling=pooling, zoneout=zoneout)
             for k in range(self.num_layers))
         self.drop = nn.Dropout(self.dropout)
@@ -360,7 +370,8 @@ class QRNN(nn.Module):
             h, c_last = layer(h_in, None if state is None else state[k], past=past_k)
             finals.append(c_last)
             if tails:
-                tail = layer._padded(h_in, past_k)[-(layer.window - 1):]
+                padded = layer._padded(h_in, past_k)
+                tail = padded[padded.shape[0] - (layer.window - 1):]
                 last_inputs.append(tail.transpose(0, 1))
         return h, torch.stack(finals), tuple(last_inputs)
 

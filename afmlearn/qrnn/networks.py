@@ -78,7 +78,9 @@ class QRNNNet(AbstractSequenceNet):
     num_layers : int
         Stacked layers ``>= 1``.
     window : int
-        Causal convolution width ``>= 2``.
+        Causal convolution width ``>= 1`` of the first layer.
+    upper_window : int, optional
+        Width of the layers above it (None: ``window``); see `afmlearn.qrnn.layer.QRNN`.
     pooling : AbstractPooling, optional
         `FPooling`, `FOPooling` (default) or `IFOPooling`.
     zoneout : float
@@ -88,12 +90,14 @@ class QRNNNet(AbstractSequenceNet):
     """
 
     def __init__(self, input_size: int, hidden_size: int, *, num_layers: int = 2,
-                 window: int = 2, pooling: AbstractPooling | None = None,
+                 window: int = 2, upper_window: int | None = None,
+                 pooling: AbstractPooling | None = None,
                  zoneout: float = 0.0, dropout: float = 0.0) -> None:
         super().__init__()
         self._check_sizes(input_size, hidden_size, num_layers)
         self.qrnn = QRNN(input_size, hidden_size, num_layers=num_layers, window=window,
-                         pooling=pooling, zoneout=zoneout, dropout=dropout)
+                         upper_window=upper_window, pooling=pooling, zoneout=zoneout,
+                         dropout=dropout)
 
     def encode(self, x: Tensor) -> Tensor:
         self._check_x(x)

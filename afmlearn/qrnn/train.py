@@ -27,12 +27,14 @@ from pathlib import Path
 from typing import Any
 
 import lightning.pytorch as pl
+import numpy as np
 import torch
 from hydra.utils import instantiate
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint
 from omegaconf import DictConfig, OmegaConf
 
-from afmlearn.qrnn.evaluate import evaluate
+from afmlearn.qrnn.calibration import CouplingCalibration, expected_calibration_error
+from afmlearn.qrnn.evaluate import collect, evaluate, trace_table
 from afmlearn.qrnn.module import CHECKPOINT_KEY, OrbitModule
 
 __all__ = ["train", "export_checkpoint", "resolve_ckpt_path"]
@@ -103,11 +105,14 @@ def _atomic_write_text(path: Path, text: str) -> None:
 
 
 def export_checkpoint(module: OrbitModule, path: str | os.PathLike[str], *,
-                      metrics: dict[str, float] | None = None) -> Path:
+                      metrics: dict[str, float] | None = None,
+                      calibration: CouplingCalibration | None = None) -> Path:
     """Write a slim checkpoint: ``state_dict`` (float32) + afmlearn metadata, no optimiser.
 
     The file loads with ``torch.load(..., weights_only=True)`` and with
-    :func:`afmlearn.qrnn.infer.load_module`. Written atomically; returns the path.
+    :func:`afmlearn.qrnn.infer.load_module`. ``calibration`` (the coupling calibration and
+    flag threshold) is stored as plain types under the metadata key ``calibration``. Written
+    atomically; returns the path.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -117,6 +122,8 @@ def export_checkpoint(module: OrbitModule, path: str | os.PathLike[str], *,
     }
     module.on_save_checkpoint(checkpoint)
     checkpoint[CHECKPOINT_KEY]["metrics"] = dict(metrics or {})
+    if calibration is not None:
+        checkpoint[CHECKPOINT_KEY]["calibration"] = calibration.to_dict()
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
     try:
         torch.save(checkpoint, tmp)
@@ -125,6 +132,47 @@ def export_checkpoint(module: OrbitModule, path: str | os.PathLike[str], *,
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def calibrate(module: OrbitModule, datamodule: Any, cfg: Any
+              ) -> tuple[CouplingCalibration, dict[str, float]]:
+    """Fit the coupling calibration on the validation cantilevers (never trained on) and
+    measure it on the test cantilevers.
+
+    Parameters
+    ----------
+    module : OrbitModule
+        The trained module (best weights).
+    datamodule : SweepDataModule
+    cfg : mapping
+        ``calibrator`` (a config node instantiating an
+        :class:`~afmlearn.qrnn.calibration.AbstractCalibrator`) and ``false_flag_rate``.
+
+    Returns
+    -------
+    calibration : CouplingCalibration
+    metrics : dict
+        ``calibration/threshold``, ``calibration/false_flag_rate`` (stated),
+        ``calibration/val_*`` (on the calibration set) and ``heldout/calibrated_recall``,
+        ``heldout/calibrated_false_flags``, ``heldout/calibrated_ece`` (test cantilevers).
+    """
+    val = trace_table(collect(module, datamodule.val_dataloader()))
+    cal = CouplingCalibration.fit(val["raw_score"], val["coupled"],
+                                  calibrator=instantiate(cfg.calibrator),
+                                  false_flag_rate=float(cfg.false_flag_rate),
+                                  source={"split": "val (held-out cantilevers)"})
+    test = trace_table(collect(module, datamodule.test_dataloader()))
+    p = cal.probability(test["raw_score"])
+    y = test["coupled"]
+    out = {"calibration/threshold": cal.threshold,
+           "calibration/false_flag_rate": cal.false_flag_rate,
+           **{f"calibration/val_{k}": float(v) for k, v in cal.source.items()
+              if isinstance(v, int | float)},
+           "heldout/calibrated_recall": float(np.mean(p[y] >= cal.threshold)) if y.any()
+           else float("nan"),
+           "heldout/calibrated_false_flags": float(np.mean(p[~y] >= cal.threshold)),
+           "heldout/calibrated_ece": expected_calibration_error(p, y)}
+    return cal, out
 
 
 def _floats(metrics: dict[str, Any]) -> dict[str, float]:
@@ -200,11 +248,18 @@ def train(cfg: DictConfig, *, extra_callbacks: Sequence[Callback] = ()
         datamodule.setup("test")
         held = evaluate(model, datamodule.test_dataloader())
         metrics.update({f"heldout/{k}": v for k, v in held.items()})
+    calibration = None
+    if cfg.get("calibration") and cfg.get("test", True):
+        try:
+            calibration, cal_metrics = calibrate(model, datamodule, cfg.calibration)
+            metrics.update(cal_metrics)
+        except ValueError as err:  # e.g. a tiny validation split with one class only
+            log.warning("coupling calibration skipped: %s", err)
     if trainer.is_global_zero:
         _atomic_write_text(output_dir / "metrics.json",
                            json.dumps(metrics, indent=2, sort_keys=True) + "\n")
         if cfg.get("export"):
-            export_checkpoint(model, cfg.export, metrics=metrics)
+            export_checkpoint(model, cfg.export, metrics=metrics, calibration=calibration)
     objects = {"cfg": cfg, "datamodule": datamodule, "model": model, "trainer": trainer,
                "callbacks": callbacks, "loggers": loggers, "ckpt_path": ckpt_path,
                "best_model_path": best, "output_dir": output_dir}

@@ -15,7 +15,13 @@ import torch
 
 from afmlearn.io import Trace, TraceFormatError, read_trace, write_trace
 from afmlearn.qrnn.data import windows_from_trace
-from afmlearn.qrnn.infer import DEFAULT_CHECKPOINT, coupling_summary, infer, load_module
+from afmlearn.qrnn.infer import (
+    DEFAULT_CHECKPOINT,
+    calibration_of,
+    coupling_summary,
+    infer,
+    load_module,
+)
 
 ROOT = Path(__file__).resolve().parents[3]
 F0 = 300e3              # Hz
@@ -56,9 +62,13 @@ def test_infer_on_a_sweep_file(tiny_run, tmp_path):
     win = windows_from_trace(trace, samples_per_period=run["samples_per_period"],
                              horizon=run["horizon"])
     scores = module.predict_windows(torch.from_numpy(win["x"]))["coupled"].numpy()
+    cal = calibration_of(run)        # train() calibrates on the validation cantilevers
+    assert saved["calibrated"] == (cal is not None)
     for row in saved["traces"]:
         ref = scores[win["row"] == row["row"]].mean()
-        assert row["score"] == pytest.approx(ref, abs=1e-6)
+        assert row["raw_score"] == pytest.approx(ref, abs=1e-6)
+        prob = ref if cal is None else float(cal.probability([ref])[0])
+        assert row["score"] == pytest.approx(prob, abs=1e-6)
         assert row["flag"] == (row["score"] >= 0.4)
         assert row["drive_frequency_hz"] == pytest.approx(trace.drive_frequency_hz[row["row"]])
         assert len(row["forecast_nrmse_per_period"]) == run["horizon"]
@@ -76,7 +86,7 @@ def test_infer_single_trace_and_summary(tiny_run, tmp_path):
     write_trace(single, path)
     res = infer(path, tmp_path / "o", checkpoint=tiny_run["checkpoint"], figures=False)
     assert not res["is_sweep"] and res["sweet_spot"] is None
-    assert 0.0 <= res["score"] <= 1.0 and res["flag"] == (res["score"] >= 0.5)
+    assert 0.0 <= res["score"] <= 1.0 and res["flag"] == (res["score"] >= res["threshold"])
     text = coupling_summary(path, checkpoint=tiny_run["checkpoint"])
     assert f"{res['score']:.3f}" in text
 

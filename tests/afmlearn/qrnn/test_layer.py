@@ -131,10 +131,12 @@ def test_stack_composes_layers_and_dropout_only_between() -> None:
     assert h.shape == (2, 20, 5) and c.shape == (3, 2, 5)
 
 
+@pytest.mark.parametrize("upper", [None, 1])
 @pytest.mark.parametrize("pieces", [[40], [1, 1, 5, 33], [13, 27]])
-def test_stream_in_pieces_equals_one_call(pieces: list[int]) -> None:
+def test_stream_in_pieces_equals_one_call(pieces: list[int], upper: int | None) -> None:
     torch.manual_seed(5)
-    net = QRNN(3, 4, num_layers=2, window=3, zoneout=0.2, dropout=0.3).double().eval()
+    net = QRNN(3, 4, num_layers=2, window=3, upper_window=upper, zoneout=0.2,
+               dropout=0.3).double().eval()
     x = _x(2, 40, 3)
     whole, c_whole = net(x)
     carry, outs, t0 = None, [], 0
@@ -144,6 +146,21 @@ def test_stream_in_pieces_equals_one_call(pieces: list[int]) -> None:
         t0 += n
     torch.testing.assert_close(torch.cat(outs, dim=1), whole)
     torch.testing.assert_close(carry.c, c_whole)
+
+
+def test_window_one_is_a_time_distributed_projection() -> None:
+    """Upper layers with window 1 (Merity et al.): gates from the current input only."""
+    torch.manual_seed(7)
+    layer = QRNNLayer(3, 4, window=1, pooling=IFOPooling()).double()
+    x = _x(2, 11, 3)
+    z, f, (o, i) = layer.gates(x)
+    pre = torch.einsum("btk,gkh->gbth", x, layer.weight) + layer.bias.unsqueeze(1)
+    torch.testing.assert_close(z, torch.tanh(pre[0]))
+    torch.testing.assert_close(f, torch.sigmoid(pre[1]))
+    torch.testing.assert_close(o, torch.sigmoid(pre[2]))
+    torch.testing.assert_close(i, torch.sigmoid(pre[3]))
+    net = QRNN(3, 4, num_layers=3, window=2, upper_window=1)
+    assert [lay.window for lay in net.layers] == [2, 1, 1]
 
 
 def test_gradients_reach_every_parameter() -> None:
@@ -156,7 +173,7 @@ def test_gradients_reach_every_parameter() -> None:
 
 
 @pytest.mark.parametrize(("kwargs", "name"), [
-    ({"window": 1}, "window"), ({"window": 0}, "window"), ({"zoneout": 1.0}, "zoneout"),
+    ({"window": 0}, "window"), ({"zoneout": 1.0}, "zoneout"),
     ({"zoneout": -0.1}, "zoneout"), ({"pooling": "fo"}, "pooling")])
 def test_layer_bad_settings(kwargs: dict, name: str) -> None:
     with pytest.raises(ValueError, match=name):
