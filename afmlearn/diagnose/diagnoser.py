@@ -53,7 +53,6 @@ from .fit import (
     Build,
     fit_baseline,
     fit_extension,
-    refine_balance,
     refine_output_error,
     structure,
 )
@@ -204,26 +203,28 @@ class _Fit:
 class _Probe:
     """:class:`~afmlearn.diagnose.hypotheses.base.Probe` of one fitted extension."""
 
-    def __init__(self, traces: Sequence[Any], jb: JointBalance, fit: _Fit) -> None:
+    def __init__(self, traces: Sequence[Any], oe: OutputError, fit: _Fit, nfev: int) -> None:
         self.traces = traces
-        self._jb = jb
+        self._oe = oe
         self._fit = fit
+        self._nfev = nfev
 
     def profile(self, name: str, values: Sequence[float]) -> FloatArray:
+        """Output-error chi-square with parameter ``name`` held at each of ``values`` (in the
+        order given, each refit warm-started from the previous one)."""
         params = self._fit.params
         k = [p.name for p in params].index(name)
         rest = [p for j, p in enumerate(params) if j != k]
-        hb = self._fit.hb
-        start = [v for j, v in enumerate(hb.values) if j != k]
-        phases = hb.phases
+        sol = self._fit.sol
+        start = dataclasses.replace(sol, values=tuple(v for j, v in enumerate(sol.values)
+                                                      if j != k))
         out = []
         for value in values:
             def build(v: Sequence[float], value: float = float(value)) -> Any:
                 return self._fit.build([*v[:k], value, *v[k:]])
-            sol = refine_balance(self._jb, build, rest, start, phases, None, 12)
-            out.append(sol.chi2)
-            start = list(sol.values)
-            phases = sol.phases
+            refit, _ = self._oe.refine(start, build, rest, max_nfev=self._nfev)
+            out.append(refit.chi2)
+            start = refit
         return np.asarray(out, float)
 
 
@@ -459,7 +460,9 @@ class Diagnoser:
             hb.set_whitening(dataclasses.replace(
                 b0, spec=b0.spec.replace(drive_phase=b0.phases[i])))
         base_hb = fit_baseline(jb, ctx)
-        oe = OutputError(jb, cal0.scales)
+        # one record: 256 RK4 steps per period as calibrated; several: 128 (with located force
+        # switches the orbit then moves by < 0.1 of its noise, and both models share it)
+        oe = OutputError(jb, cal0.scales, n_out=256 if single else 128)
         self._oe = oe
         base, ok, build, params = refine_output_error(oe, [base_hb], None, base_hb, ctx)
         if not ok:
@@ -597,7 +600,7 @@ class Diagnoser:
             else:
                 sol, _, build, params = refine_output_error(
                     oe, starts[:1], h, current.sol, ctx, max_nfev=self.joint_nfev,
-                    nested="fallback" if step == 0 else "always")
+                    nested="fallback")
         key = h.cause if current.key == "none" else f"{current.key}+{h.cause}"
         fit = _Fit(sol, starts[0], build, params, key, np.full(jb.n_obs, np.nan))
         d = float(current.sol.chi2 - sol.chi2)
@@ -607,7 +610,7 @@ class Diagnoser:
         model = oe.model(rep, sol.spec, sol.coef, sol.phases[rep])
         before = oe.model(rep, current.sol.spec, current.sol.coef, current.sol.phases[rep])
         if h.cause not in tested:
-            tested[h.cause] = h.details(model, _Probe(traces, jb, fit))
+            tested[h.cause] = h.details(model, _Probe(traces, oe, fit, 6))
         energy = np.array([self._energy(before), self._energy(model)])
         cand = Candidate(cause=h.cause, model=model, chi2=float(sol.chi2), delta_chi2=d,
                          threshold=thr, heldout_nrmse=math.nan, gain=math.nan,

@@ -79,8 +79,9 @@ class Probe(Protocol):
     traces: Sequence[Any]
 
     def profile(self, name: str, values: Sequence[float]) -> NDArray[np.float64]:
-        """Chi-square (harmonic balance, all observations) with the extension's parameter
-        ``name`` held at each of ``values`` and everything else refitted."""
+        """Output-error chi-square (all observations) with the extension's parameter ``name``
+        held at each of ``values`` and everything else refitted (warm-started in the order
+        given)."""
         ...
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any, final
 
@@ -31,8 +30,8 @@ class ContactGeometry(AbstractHypothesis):
     def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
         return spec.replace(contact_exponent=float(values[0]))
 
-    #: exponents of the profile likelihood (the searched range, step 0.125)
-    profile_grid = tuple(float(v) for v in np.round(np.arange(1.0, 3.5001, 0.125), 3))
+    #: first step of the profile search and its growth factor (steps 0.1, 0.2, 0.4, ...)
+    profile_step = 0.1
     #: chi-square rise that bounds a 95 % interval of one parameter
     level = 3.841
 
@@ -42,33 +41,38 @@ class ContactGeometry(AbstractHypothesis):
 
         Across set-points the indentation depth changes while the law stays, which is what
         separates the exponent from ``a0`` and the stiffness; on one orbit the profile is
-        flat. The interval is where the profile chi-square is within 3.84 of its minimum; an
-        end that reaches the searched range [1, 3.5] means the data do not bound it.
+        flat. From the fitted exponent the profile steps outwards on each side (0.1, 0.2,
+        0.4, ... away) until the chi-square rises by 3.84 (the ends are interpolated
+        linearly) or the searched range [1, 3.5] is reached: then the data do not bound it.
         """
-        grid = np.asarray(self.profile_grid)
-        chi = probe.profile("contact_exponent", grid)
-        best = int(np.argmin(chi))
-        rise = chi - chi[best] - self.level
-        lo, hi = float(grid[0]), float(grid[-1])
-        bounded_lo = bounded_hi = False
-        for j in range(best, 0, -1):
-            if rise[j - 1] > 0:
-                lo = float(np.interp(0.0, [rise[j], rise[j - 1]], [grid[j], grid[j - 1]]))
-                bounded_lo = True
-                break
-        for j in range(best, grid.size - 1):
-            if rise[j + 1] > 0:
-                hi = float(np.interp(0.0, [rise[j], rise[j + 1]], [grid[j], grid[j + 1]]))
-                bounded_hi = True
-                break
-        bounded = bounded_lo and bounded_hi
         p = float(model.spec.contact_exponent)
+        ends, bounded, points = [], True, {p: 0.0}
+        for side in (-1.0, 1.0):
+            prev, prev_rise, step, end, closed = p, 0.0, self.profile_step, None, False
+            base = None
+            while end is None:
+                q = min(max(p + side * step, 1.0), 3.5)
+                chi = float(probe.profile("contact_exponent", [q])[0])
+                if base is None:
+                    base = float(probe.profile("contact_exponent", [p])[0])
+                    points[p] = base
+                points[q] = chi
+                rise = chi - base - self.level
+                if rise > 0:
+                    end = float(np.interp(0.0, [prev_rise, rise], [prev, q]))
+                    closed = True
+                elif q in (1.0, 3.5):
+                    end = q
+                prev, prev_rise, step = q, rise, 2 * step
+            ends.append(end)
+            bounded = bounded and closed
+        lo, hi = ends
+        grid = sorted(points)
         text = (f"95 % profile interval of the exponent [{lo:.2f}, {hi:.2f}]" if bounded else
                 f"the data do not bound the exponent (95 % profile interval [{lo:.2f}, "
                 f"{hi:.2f}] reaches the searched range)")
         return {"exponent": p, "exponent_interval": [lo, hi], "bounded": bounded,
-                "profile": {"exponent": grid.tolist(), "chi2": chi.tolist()},
-                "profile_minimum": float(grid[best]) if math.isfinite(chi[best]) else None,
+                "profile": {"exponent": grid, "chi2": [points[g] for g in grid]},
                 "text": text}
 
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
