@@ -120,7 +120,7 @@ class CurveDiagnoser:
             c["score"] = float(next(weights)) if o else 0.0
         cands.sort(key=lambda c: c["evidence"], reverse=True)
         self.candidates_ = cands
-        eligible = [c for c, o in zip(cands, ok, strict=True) if o]
+        eligible = [c for c in cands if not (c["gain"] <= 0.0)]
         best = eligible[0] if eligible else None
         named = best is not None and best["evidence"] > self.threshold
         self.cause_ = best["cause"] if named else "none"
