@@ -28,7 +28,7 @@ from .fit import CurveFitter
 from .hypotheses import EXTENSIONS, Hypothesis
 from .law import CurveLaw
 
-__all__ = ["CurveDiagnoser", "equation"]
+__all__ = ["CurveDiagnoser", "equation", "heldout_nrmse", "name_cause"]
 
 log = logging.getLogger(__name__)
 
@@ -109,23 +109,8 @@ class CurveDiagnoser:
             self.fits_[h.cause] = f
             cands.append({"cause": h.cause, "evidence": float(evidence), "gain": float(gain),
                           "heldout_nrmse": float(e_held), "chi2": float(chi2)})
-        # BIC weights among the baseline and the candidates that predict the held-out
-        # retraction better than it (the others are refuted by data they did not see)
-        ok = [not (c["gain"] <= 0.0) for c in cands]
-        ev = np.array([0.0] + [c["evidence"] for c, o in zip(cands, ok, strict=True) if o])
-        w = np.exp(0.5 * (ev - ev.max()))
-        w /= w.sum()
-        weights = iter(w[1:])
-        for c, o in zip(cands, ok, strict=True):
-            c["score"] = float(next(weights)) if o else 0.0
-        cands.sort(key=lambda c: c["evidence"], reverse=True)
-        self.candidates_ = cands
-        eligible = [c for c in cands if not (c["gain"] <= 0.0)]
-        best = eligible[0] if eligible else None
-        named = best is not None and best["evidence"] > self.threshold
-        self.cause_ = best["cause"] if named else "none"
-        self.confidence_ = float(best["score"] if named else w[0])
-        self.gain_ = float(best["gain"]) if named else 0.0
+        self.candidates_, self.cause_, self.confidence_, self.gain_ = name_cause(
+            cands, threshold=self.threshold)
         self.baseline_heldout_ = float(b_held)
         return self
 
@@ -174,6 +159,46 @@ class CurveDiagnoser:
                                  free_phase=c.free_phase, quality_factor=c.quality_factor,
                                  omega=self.extended_.values_["omega"],
                                  spring_constant=1.0) * c.energy_unit_j
+
+
+def name_cause(candidates: list[dict], *, threshold: float
+               ) -> tuple[list[dict], str, float, float]:
+    """The decision rule: which cause to name from the candidates' evidence and gain.
+
+    Parameters
+    ----------
+    candidates : list of dict
+        ``cause``, ``evidence`` (delta BIC against the baseline) and ``gain`` (held-out).
+    threshold : float
+        Smallest evidence for naming a cause.
+
+    Returns
+    -------
+    scored : list of dict
+        The candidates sorted by evidence, each with ``score``: its BIC weight among the
+        baseline and the candidates with a positive held-out gain (a candidate that predicts
+        the retraction worse than the baseline is refuted: weight 0, never named).
+    cause : str
+        The eligible candidate with the largest evidence if that exceeds ``threshold``, else
+        ``none``.
+    confidence : float
+        The named cause's weight (the baseline's for ``none``).
+    gain : float
+        The named cause's held-out gain (0 for ``none``).
+    """
+    scored = sorted((dict(c) for c in candidates), key=lambda c: c["evidence"], reverse=True)
+    eligible = [c for c in scored if not (c["gain"] <= 0.0)]
+    ev = np.array([0.0] + [c["evidence"] for c in eligible])
+    w = np.exp(0.5 * (ev - ev.max()))
+    w /= w.sum()
+    for c in scored:
+        c["score"] = 0.0
+    for c, wi in zip(eligible, w[1:], strict=True):
+        c["score"] = float(wi)
+    if eligible and eligible[0]["evidence"] > threshold:
+        best = eligible[0]
+        return scored, best["cause"], best["score"], float(best["gain"])
+    return scored, "none", float(w[0]), 0.0
 
 
 def heldout_nrmse(fit: CurveFitter, curve: Curve, mask: np.ndarray) -> float:
