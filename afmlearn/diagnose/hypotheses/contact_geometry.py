@@ -48,7 +48,7 @@ class ContactGeometry(AbstractHypothesis):
         p = float(model.spec.contact_exponent)
         ends, bounded, points = [], True, {p: 0.0}
         for side in (-1.0, 1.0):
-            prev, prev_rise, step, end, closed = p, 0.0, self.profile_step, None, False
+            prev, prev_rise, step, end, closed = p, -self.level, self.profile_step, None, False
             base = None
             while end is None:
                 q = min(max(p + side * step, 1.0), 3.5)
