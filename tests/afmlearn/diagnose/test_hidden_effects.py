@@ -1,5 +1,7 @@
-"""Hidden-effect tests (issue 5): one effect of the vocabulary, or none, switched on by a seeded
-draw the diagnosis cannot see; it must name it with a positive held-out gain.
+"""Hidden-effect tests (issues 5 and 12): one effect of the vocabulary, or none, or two at once,
+switched on by a seeded draw the diagnosis cannot see; it must name it with a positive held-out
+gain. Single orbits (issue 5) and set-point series (issue 12: one joint model over every
+set-point, the gain measured on set-points the model was not fitted on).
 
 The draw (cause and every parameter: Q 150-450, free amplitude 1.2-1.8 gaps, tip radius,
 Hamaker constant, E*, a0, the effect's strength) happens inside
@@ -23,13 +25,15 @@ docs/benchmarks.md):
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from scipy import stats
 
 from afmlearn.diagnose import CAUSES, Diagnoser
-from afmlearn.diagnose.synthetic import hidden_trace
-from afmlearn.io import read_trace
+from afmlearn.diagnose.synthetic import hidden_series, hidden_trace
+from afmlearn.io import Experiment, read_trace
 
 
 def _diagnose(tmp_path, seed: list[int], *, cause: str | None = None, spp: int = 200,
@@ -101,4 +105,92 @@ def test_hidden_effects_every_cause(tmp_path):
             if not ok:
                 failures.append(f"{cause} -> {dg.cause_} ({dg.gain_:+.3f})")
     p_value = stats.binom.cdf(right, total, BENCHMARK_RATE)
+    assert p_value >= 0.01, f"{right}/{total} (p = {p_value:.3g}): {failures}"
+
+
+# ---------------------------------------------------------------------- set-point series
+def _diagnose_series(tmp_path, seed: list[int], *, causes: str | None = None,
+                     n_points: int = 3, spp: int = 200, periods: float = 20,
+                     noise: float = 0.01):
+    path = tmp_path / f"series-{'-'.join(map(str, seed))}.h5"
+    case = hidden_series(np.random.default_rng(seed), path, causes=causes, n_points=n_points,
+                         samples_per_period=spp, n_periods=periods, noise_level=noise)
+    dg = Diagnoser().fit(Experiment.read(path))       # no labels, no file name
+    return case, dg
+
+
+def _found(dg) -> list[str]:
+    return [s.cause for s in dg.causes_]
+
+
+def _check_series(case, dg, *, exact: bool = True, complete: bool = True) -> None:
+    truth = case.causes
+    msg = (f"truth {case.cause} {case.effects}, named {_found(dg)} (gain {dg.gain_:.3f}); "
+           + ", ".join(f"{c.cause} {c.delta_chi2:.1f}/{c.threshold:.1f}/{c.gain:+.3f}"
+                       for c in dg.candidates_))
+    if not truth:
+        assert dg.cause_ == "none" and _found(dg) == [], msg
+        return
+    found = _found(dg)
+    assert dg.cause_ == (found[0] if found else "none"), msg
+    assert len(set(found)) == len(found), msg                 # each cause named once
+    if exact:
+        if complete:
+            assert set(truth) <= set(found), msg
+        assert dg.cause_ in truth, msg                        # the first one is real
+    else:                                                      # the dissipative family ties
+        fam = set(DISSIPATIVE)
+        for t in truth:
+            assert t in found or (t in fam and fam & set(found)), msg
+    assert dg.gain_ > 0.0 and dg.extended_nrmse_ < dg.baseline_nrmse_, msg
+    for s in dg.causes_:
+        assert math.isfinite(s.gain), msg
+
+
+def test_hidden_series_null_fast(tmp_path):
+    """A null series (the baseline is the truth): no cause, in no step."""
+    case, dg = _diagnose_series(tmp_path, [51, 0], causes="none")
+    _check_series(case, dg)
+
+
+@pytest.mark.parametrize("causes", ["higher_mode+detector_nonlinearity", None])
+def test_hidden_series_fast(tmp_path, causes):
+    """Two effects at once (a second mode and the detector, which one orbit already names
+    reliably: issue 5, 90-100 %) and one draw whose cause the seed picks (hidden from the
+    test's author too; the dissipative family may tie on three set-points).
+
+    For the pair the first cause named must be one of the two, with a held-out gain; that
+    both are found is checked by rate in the slow test and the benchmark (measured on this
+    draw, 3 set-points: the detector first, then ``contact_geometry`` instead of the second
+    mode at f2/f0 = 6.29)."""
+    case, dg = _diagnose_series(tmp_path, [52, 0 if causes else 3], causes=causes)
+    _check_series(case, dg, exact=causes is not None, complete=False)
+
+
+#: measured share of series draws named exactly right at 200 samples per period and 1 % noise
+#: with 8 set-points (docs/benchmarks.md, section diagnose_series); the slow test below checks
+#: that a fresh set of draws is not significantly worse
+SERIES_RATE = 0.5
+
+
+@pytest.mark.slow
+def test_hidden_series_every_cause(tmp_path):
+    """One 8-set-point draw per cause and two two-effect draws, 200 samples per period and 1 %
+    noise: the null series ``none``; the effects found exactly (all of a pair) at a rate not
+    significantly below :data:`SERIES_RATE` (one-sided binomial test at 1 %)."""
+    right, total, failures = 0, 0, []
+    labels = [*CAUSES, "viscoelastic+electrostatic", "higher_mode+contact_geometry"]
+    for draw, causes in enumerate(labels):
+        case, dg = _diagnose_series(tmp_path, [61, draw], causes=causes, n_points=8,
+                                    periods=30)
+        if causes == "none":
+            _check_series(case, dg)
+            continue
+        total += 1
+        ok = set(case.causes) <= set(_found(dg)) and dg.cause_ in case.causes \
+            and dg.gain_ > 0
+        right += ok
+        if not ok:
+            failures.append(f"{case.cause} -> {_found(dg)} ({dg.gain_:+.3f})")
+    p_value = stats.binom.cdf(right, total, SERIES_RATE)
     assert p_value >= 0.01, f"{right}/{total} (p = {p_value:.3g}): {failures}"
