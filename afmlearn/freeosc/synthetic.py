@@ -5,10 +5,11 @@ the mean amplitude), driven on resonance with a slowly modulated amplitude (a st
 self-oscillation whose amplitude wanders: the lever arm that separates ``A^n`` scaling from a
 fixed drive), optionally with an electrostatic force at ``2 Omega`` of fixed amplitude (an ac
 bias at the oscillation frequency, ``F ~ V_ac^2 cos(2 Omega tau + theta)``), solved exactly
-for piecewise-constant forcing (zero-order-hold discretisation on an 8x finer grid, then
-decimated). The measurement is `simulator.SensorChain` (e.g. `DetectorNonlinearity`,
-`GaussianNoise`, `Quantizer`). The simulator's force models have no ac bias, hence this
-linear solver here; a linear lever needs no numerical integration.
+for piecewise-constant forcing (zero-order-hold discretisation on an 8x finer grid, each
+step holding the forcing's midpoint value, then decimated; checked against an adaptive ODE
+integration in the tests). The measurement is `simulator.SensorChain` (e.g.
+`DetectorNonlinearity`, `GaussianNoise`, `Quantizer`). The simulator's force models have no
+ac bias, hence this linear solver here; a linear lever needs no nonlinear integrator.
 """
 
 from __future__ import annotations
@@ -76,14 +77,17 @@ def simulate_free(*, n_periods: int = 4000, samples_per_period: float = 19.0,
     n = int(round(n_periods * samples_per_period))
     dtau = 2 * math.pi / samples_per_period / _OVERSAMPLE
     tau = np.arange(n * _OVERSAMPLE) * dtau
-    envelope = 1.0 + modulation_depth * np.sin(tau / modulation_periods)
-    force = envelope / quality_factor * np.sin(tau)  # on resonance: x ~ envelope * -cos(tau)
-    force += ac_force * np.cos(2 * tau + ac_phase_rad)
+    mid = tau + dtau / 2  # the held value of each step at its midpoint: 2nd-order accurate
+    envelope = 1.0 + modulation_depth * np.sin(mid / modulation_periods)
+    force = envelope / quality_factor * np.sin(mid)  # on resonance: x ~ envelope * -cos(tau)
+    force += ac_force * np.cos(2 * mid + ac_phase_rad)
     num_d, den_d, _ = signal.cont2discrete(([1.0], [1.0, 1.0 / quality_factor, 1.0]), dtau,
                                            method="zoh")
     # start on the steady orbit of the mean drive: x(0) = -1, x'(0) = 0 (transient avoided)
     x = signal.lfilter(np.ravel(num_d), den_d, force)
-    free = -np.cos(tau) * np.exp(-tau / (2 * quality_factor))  # homogeneous part, x(0) = -1
+    wd = math.sqrt(1.0 - 1.0 / (4 * quality_factor**2))  # homogeneous part: x(0) = -1, x'(0) = 0
+    free = -np.exp(-tau / (2 * quality_factor)) * (
+        np.cos(wd * tau) + np.sin(wd * tau) / (2 * quality_factor * wd))
     x = (x + free)[::_OVERSAMPLE]
     chain = sensor if sensor is not None else SensorChain([])
     y = chain(x, x_ref=1.0, dt=2 * math.pi / samples_per_period)
