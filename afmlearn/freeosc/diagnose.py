@@ -46,6 +46,7 @@ from afmlearn.freeosc.combined import Combined
 from afmlearn.freeosc.demodulate import Demodulation, demodulate
 from afmlearn.freeosc.evidence import (
     dc_coupling,
+    gap_force_requirement,
     non_harmonic_peak,
     phase_lock,
     quantisation_step,
@@ -263,7 +264,7 @@ def diagnose_free(y: ArrayLike, *, sample_rate_hz: float, heldout_fraction: floa
     model = Combined(current) if current else LinearLever()
     model.fit(y[train], demod.take(train))
     track = track_harmonics(y, demod, n_harmonics=n_h, block_periods=block_periods)
-    evidence = _evidence(y, demod, track, sample_rate_hz=sample_rate_hz)
+    evidence = _evidence(y, demod, track, candidates, sample_rate_hz=sample_rate_hz)
     logger.info("free oscillation: cause %s, held-out gain %.3f", cause_name,
                 1.0 - current_err / base)
     return FreeOscillationDiagnosis(
@@ -281,19 +282,32 @@ def diagnose_free(y: ArrayLike, *, sample_rate_hz: float, heldout_fraction: floa
         ])
 
 
-def _evidence(y: NDArray[np.float64], demod: Demodulation, track: HarmonicTrack, *,
-              sample_rate_hz: float) -> dict[str, Any]:
+def _evidence(y: NDArray[np.float64], demod: Demodulation, track: HarmonicTrack,
+              candidates: list[dict[str, Any]], *, sample_rate_hz: float) -> dict[str, Any]:
     valid = demod.valid
     freq = demod.frequency_hz[valid]
     rel = track.relative.mean(axis=0)
+    scaling = {f"h{n}": scaling_with_drift(track, n) for n in (2, 3)}
+    duration = float(np.ptp(track.time_s)) if track.time_s.size else 0.0
+    drift = scaling["h2"]["drift_per_s"] * duration
+    block_freq = [float(np.mean(b)) for b in np.array_split(freq, max(track.time_s.size, 1))]
+    gap = next((c for c in candidates if c["model"] == "GapModulatedForce"), None)
+    extra: dict[str, Any] = {}
+    if gap is not None and math.isfinite(drift):
+        extra["gap_force_requirement"] = gap_force_requirement(
+            gap["coef"][0], float(track.amplitude.mean()), harmonic_drift=drift)
     return {
+        **extra,
+        "harmonic_drift_over_record": {"h2": drift,
+                                       "h3": scaling["h3"]["drift_per_s"] * duration},
+        "block_frequency_range": float(np.ptp(block_freq)) / demod.carrier_hz,
         "carrier_hz": demod.carrier_hz,
         "samples_per_period": sample_rate_hz / demod.carrier_hz,
         "n_blocks": int(track.time_s.size),
         "relative_harmonics": rel.tolist(),
         "harmonic_noise_floor": float(np.mean(track.harmonic_sigma / track.amplitude)),
         "amplitude_range": [float(track.amplitude.min()), float(track.amplitude.max())],
-        "scaling": {f"h{n}": scaling_with_drift(track, n) for n in (2, 3)},
+        "scaling": scaling,
         "phase_lock": {f"h{n}": phase_lock(track, n) for n in (2, 3)},
         "dc_coupling": dc_coupling(track),
         "frequency_hz": {"median": float(np.median(freq)),

@@ -6,20 +6,23 @@
 - `dc_coupling`: slope of the block offset against ``Re R_2`` (detector map +1, a
   gap-modulated force on resonance -3);
 - `non_harmonic_peak`: the largest spectral line that is not a harmonic (higher mode);
-- `quantisation_step`: the ADC step from the distinct values of the record.
+- `quantisation_step`: the ADC step from the distinct values of the record;
+- `gap_force_requirement`: the force gradient (and hence frequency drift) a gap-modulated
+  power-law force would need to make the fitted 2nd harmonic (calibration-free).
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from afmlearn.freeosc.track import HarmonicTrack
 
-__all__ = ["dc_coupling", "non_harmonic_peak", "phase_lock", "quantisation_step",
-           "scaling_with_drift"]
+__all__ = ["dc_coupling", "gap_force_requirement", "non_harmonic_peak", "phase_lock",
+           "quantisation_step", "scaling_with_drift"]
 
 
 def _ols(design: NDArray[np.float64], target: NDArray[np.float64]
@@ -112,3 +115,42 @@ def quantisation_step(y: ArrayLike) -> float:
     if values.size < 2 or values.size > y.size / 10:
         return math.nan
     return float(np.median(np.diff(values)))
+
+
+def gap_force_requirement(f2: float, amplitude: float, *, harmonic_drift: float,
+                          exponents: tuple[int, ...] = (1, 2, 3)) -> dict[str, Any]:
+    """What a gap-modulated power-law force needs to make the fitted 2nd harmonic.
+
+    A force ``F ~ z^-m`` at rest gap ``z`` expanded in the motion has
+    ``F''/F' = (m + 1)/z``; the fitted ``f2 = F''/(2k)`` at amplitude ``A`` without contact
+    (``z >= A``) therefore needs a gradient ``F'/k >= 2 f2 A / (m + 1)`` (``f2 A`` is
+    dimensionless: no calibration enters). If the harmonics drift by a fraction ``eps`` at a
+    fixed amplitude, such a force (``F'' ~ z^-(m+2)``) changed by ``eps``, its gradient by
+    ``(m + 1)/(m + 2) eps``, and the oscillation frequency
+    (``f ~ sqrt(1 - F'/k)``) by ``|df/f| >= (1/2) (m + 1)/(m + 2) eps g / (1 - g)``,
+    ``g = F'/k``.
+
+    Parameters
+    ----------
+    f2 : float
+        Fitted ``F''/(2k)`` [1/record unit] (`GapModulatedForce` coefficient 0).
+    amplitude : float
+        Mean oscillation amplitude, record units.
+    harmonic_drift : float
+        Relative change of the 2nd harmonic at fixed amplitude over the record.
+    exponents : tuple of int
+        Power laws m to evaluate (1: sphere close to a plane, 2: plane-plane ...).
+
+    Returns
+    -------
+    dict
+        ``f2_times_amplitude`` and per m ``gradient_min`` (F'/k, >= 1: the lever would snap
+        in) and ``frequency_change_min`` (fraction).
+    """
+    out: dict[str, Any] = {"f2_times_amplitude": float(abs(f2) * amplitude)}
+    eps = abs(harmonic_drift)
+    for m in exponents:
+        g = 2.0 * abs(f2) * amplitude / (m + 1)
+        df = math.inf if g >= 1 else 0.5 * (m + 1) / (m + 2) * eps * g / (1 - g)
+        out[f"m{m}"] = {"gradient_min": g, "frequency_change_min": df}
+    return out

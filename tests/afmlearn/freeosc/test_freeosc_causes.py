@@ -131,3 +131,13 @@ def test_bad_settings_and_unfitted_use_raise() -> None:
     y = np.cos(2 * math.pi * np.arange(2000) / FS)
     with pytest.raises(ValueError, match="not fitted"):
         DetectorNonlinearity().predict(demodulate(y, sample_rate_hz=FS))
+
+
+def test_gap_force_requirement_known_values() -> None:
+    from afmlearn.freeosc.evidence import gap_force_requirement
+    out = gap_force_requirement(1.0, 0.5, harmonic_drift=0.03)
+    # m = 1: F'/k >= 2 f2 A / 2 = 0.5; df/f >= 1/2 * 2/3 * 0.03 * 0.5 / 0.5 = 0.01
+    assert out["m1"]["gradient_min"] == pytest.approx(0.5)
+    assert out["m1"]["frequency_change_min"] == pytest.approx(0.01)
+    assert gap_force_requirement(2.0, 0.6, harmonic_drift=0.0)["m1"]["frequency_change_min"] \
+        == math.inf  # F'/k >= 1.2: the lever would snap in
