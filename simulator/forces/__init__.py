@@ -1,18 +1,19 @@
 """Tip--sample force models (dimensionless; positive = repulsive).
 
-Each model has a NumPy reference (``model(z, zdot, contact)``) and a canonical coefficient
-vector for the compiled kernel :func:`simulator.forces._kernel.ts_force`.
+Each model has a NumPy reference (``model(z, zdot, contact)``) and its terms in the one
+force-law representation (:class:`ForceLaw`, ``model.law()``) that the compiled evaluator
+:func:`simulator.forces._kernel.law_force` and the integrator kernel read.
 """
 
-from .base import AbstractForceModel
+from .base import AbstractForceModel, ForceSum
 from .dmt import DMT
 from .electrostatic import Electrostatic
 from .exponential_damping import ExponentialDamping
 from .jkr import JKR
 from .jkr_hysteretic import HystereticJKR
+from .law import ForceLaw, Kind, Term
 from .lennard_jones import LennardJones
 from .none import NoInteraction
-from .sum import ForceSum
 from .vdw_sphere import SphereVdW
 from .viscoelastic import ViscoelasticDMT
 
@@ -21,11 +22,14 @@ __all__ = [
     "DMT",
     "Electrostatic",
     "ExponentialDamping",
+    "ForceLaw",
     "ForceSum",
     "HystereticJKR",
     "JKR",
+    "Kind",
     "LennardJones",
     "NoInteraction",
     "SphereVdW",
+    "Term",
     "ViscoelasticDMT",
 ]

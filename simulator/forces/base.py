@@ -1,30 +1,33 @@
-"""Abstract tip--sample force model.
+"""Abstract tip--sample force model and the sum of models.
 
 A force model is a small immutable object with dimensionless parameters (lengths in units of
 the rest gap ``L_ref``, forces in units of ``k L_ref``, rates per ``tau = omega0 t``). It has
 
+* :meth:`AbstractForceModel.law`, its terms in the one force-law representation
+  (:class:`~simulator.forces.law.ForceLaw`) that the compiled kernels read, and
 * a plain NumPy reference evaluation ``model(z, zdot, contact)`` written term by term from the
-  physics (used by tests and by analysis code), and
-* ``coefficients()``, the canonical vector read by the compiled kernel in ``_kernel.py`` (the
-  fast path used by the integrators). Tests check one against the other.
+  physics (used by tests and by analysis code). Tests check one against the other.
 
-Sign convention (``physics.md`` §1): ``F > 0`` is repulsive (pushes the tip towards larger
-``z``); dissipative terms oppose ``z_dot``.
+Everything else (``a0``, the break indentation, whether the model has a contact branch or can
+dissipate) is read from the law, never overridden per model.
+
+Sign convention (``physics.md`` section 1): ``F > 0`` is repulsive (pushes the tip towards
+larger ``z``); dissipative terms oppose ``z_dot``.
 """
 
 from __future__ import annotations
 
 import abc
 import math
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import Any, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import _layout as L
+from .law import ForceLaw
 
-__all__ = ["AbstractForceModel", "check_range"]
+__all__ = ["AbstractForceModel", "ForceSum", "check_range"]
 
 
 def check_range(
@@ -53,20 +56,23 @@ def check_range(
 class AbstractForceModel(abc.ABC):
     """Base class of tip--sample force models (dimensionless).
 
-    Subclasses store validated parameters in ``__init__`` and implement the single abstract
-    hook :meth:`_fill`, which writes their terms into the canonical coefficient vector.
-    Reference evaluation is provided by :meth:`_reference`, also per subclass.
+    Subclasses store validated parameters in ``__init__`` and implement three abstract
+    methods: :meth:`law` (the terms, for the compiled kernels), :meth:`_reference` (the NumPy
+    physics, for tests and analysis) and :meth:`parameters` (for labels). Models are added with
+    ``+`` (:class:`ForceSum`).
     """
 
     #: short name used in configs and labels
     name: str = "abstract"
     #: long-range terms that stop growing once the tip touches (evaluated at ``a0`` in contact)
     saturates_in_contact: bool = False
+    #: False for laws whose long-range terms must not be held at ``a0`` by a contact law
+    combines_with_contact: bool = True
 
     # ------------------------------------------------------------------ abstract hooks
     @abc.abstractmethod
-    def _fill(self, c: NDArray[np.float64]) -> None:
-        """Write this model's terms into the canonical vector ``c`` (shape (N_COEFFICIENTS,))."""
+    def law(self) -> ForceLaw:
+        """This model as a :class:`~simulator.forces.law.ForceLaw` (the kernels' input)."""
 
     @abc.abstractmethod
     def _reference(
@@ -78,33 +84,26 @@ class AbstractForceModel(abc.ABC):
     def parameters(self) -> dict[str, Any]:
         """All parameters as a JSON-serialisable mapping (used for labels)."""
 
-    # ------------------------------------------------------------------ public API
+    # ------------------------------------------------------------------ read from the law
     @property
     def a0(self) -> float:
         """Contact onset ``a0`` (dimensionless); ``0`` for models without contact."""
-        return 0.0
+        return self.law().a0
 
     @property
     def break_indentation(self) -> float:
         """Indentation (<= 0) at which an established contact breaks; 0 if not hysteretic."""
-        return 0.0
+        return -self.law().break_distance
 
     @property
     def has_contact(self) -> bool:
         """True when the model has a contact branch (a regime switched at ``z = a0``)."""
-        return bool(self.coefficients()[L.CONTACT])
+        return self.law().has_contact
 
     @property
     def dissipative(self) -> bool:
         """True if the model can dissipate energy over a closed orbit."""
-        c = self.coefficients()
-        return bool(c[L.VISCO] != 0.0 or c[L.EXPD] != 0.0 or c[L.JKR] != 0.0)
-
-    def coefficients(self) -> NDArray[np.float64]:
-        """Canonical coefficient vector, shape (N_COEFFICIENTS,), for the compiled kernel."""
-        c = np.zeros(L.N_COEFFICIENTS)
-        self._fill(c)
-        return c
+        return self.law().dissipative
 
     def contact_state(self, z: ArrayLike) -> NDArray[np.bool_]:
         """Regime of a tip arriving from far away at gap ``z`` (the approach branch)."""
@@ -116,7 +115,7 @@ class AbstractForceModel(abc.ABC):
     def __call__(
         self, z: ArrayLike, zdot: ArrayLike = 0.0, contact: ArrayLike | None = None
     ) -> NDArray[np.float64]:
-        """Evaluate the force for a whole batch.
+        """Evaluate the force for a whole batch (NumPy reference).
 
         Parameters
         ----------
@@ -140,9 +139,7 @@ class AbstractForceModel(abc.ABC):
         contact = np.broadcast_to(np.asarray(contact, dtype=bool), z.shape)
         return self._reference(z, zdot, contact)
 
-    def __add__(self, other: AbstractForceModel) -> AbstractForceModel:
-        from .sum import ForceSum
-
+    def __add__(self, other: AbstractForceModel) -> ForceSum:
         if not isinstance(other, AbstractForceModel):
             return NotImplemented
         return ForceSum([self, other])
@@ -160,6 +157,55 @@ class AbstractForceModel(abc.ABC):
 
     def __hash__(self) -> int:
         return hash((type(self).__name__, repr(self.parameters())))
+
+
+@final
+class ForceSum(AbstractForceModel):
+    """Sum of force models sharing one regime state (``DMT(...) + Electrostatic(...)``).
+
+    At most one member may carry a contact law; long-range and damping terms add. The sum's
+    law is the concatenation of its members' terms. A model with
+    ``combines_with_contact = False`` (:class:`~simulator.forces.LennardJones`: its ``z**-2``
+    attraction acts at every gap) cannot be combined with a contact law, which would hold its
+    long-range terms at ``a0`` in contact.
+
+    Parameters
+    ----------
+    terms : sequence of AbstractForceModel
+        At least one model. Nested sums are flattened.
+    """
+
+    def __init__(self, terms: Sequence[AbstractForceModel]) -> None:
+        flat: list[AbstractForceModel] = []
+        for t in terms:
+            if not isinstance(t, AbstractForceModel):
+                raise ValueError(f"terms: expected force models, got {type(t).__name__}")
+            flat.extend(t.terms if isinstance(t, ForceSum) else [t])
+        if not flat:
+            raise ValueError("terms: need at least one force model")
+        self.terms = tuple(flat)
+        law = self.law()  # validates compatibility (one contact law)
+        if law.has_contact and not all(t.combines_with_contact for t in flat):
+            raise ValueError("terms: LennardJones cannot be combined with a contact law (its "
+                             "z**-2 attraction would be frozen at a0 in contact)")
+
+    @property
+    def name(self) -> str:  # type: ignore[override]
+        return "+".join(t.name for t in self.terms)
+
+    def law(self) -> ForceLaw:
+        out = self.terms[0].law()
+        for t in self.terms[1:]:
+            out = out + t.law()
+        return out
+
+    def _reference(self, z: np.ndarray, zdot: np.ndarray, contact: np.ndarray) -> np.ndarray:
+        z_held = np.where(contact, self.a0, z)  # long-range terms saturate at contact
+        return sum((t._reference(z_held if t.saturates_in_contact else z, zdot, contact)
+                    for t in self.terms), np.zeros_like(z))
+
+    def parameters(self) -> dict[str, Any]:
+        return {"terms": [t.to_dict() for t in self.terms]}
 
 
 def _same(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:

@@ -7,10 +7,10 @@ from typing import Any, final
 import numpy as np
 
 from .._scales import Scales
-from . import _layout as L
 from .base import AbstractForceModel, check_range, clipped_pow
+from .law import ForceLaw, Kind, Term
 
-__all__ = ["DMT", "dmt_coefficients_from_si"]
+__all__ = ["DMT", "dmt_coefficients_from_si", "dmt_law"]
 
 
 def dmt_coefficients_from_si(
@@ -97,16 +97,12 @@ class DMT(AbstractForceModel):
             contact_coefficient=contact_coefficient, scales=scales))
 
     @property
-    def a0(self) -> float:
-        return self._a0
-
-    @property
     def adhesion(self) -> float:
         """Adhesion (pull-off) force ``vdw / a0**2`` (dimensionless)."""
         return self.vdw / self._a0**2
 
-    def _fill(self, c: np.ndarray) -> None:
-        _fill_contact(c, a0=self._a0, vdw=self.vdw, stiffness=self.stiffness, p=self.exponent)
+    def law(self) -> ForceLaw:
+        return dmt_law(a0=self._a0, vdw=self.vdw, stiffness=self.stiffness, p=self.exponent)
 
     def _reference(self, z: np.ndarray, zdot: np.ndarray, contact: np.ndarray) -> np.ndarray:
         return _dmt_reference(self, z, contact)
@@ -116,14 +112,11 @@ class DMT(AbstractForceModel):
                 "exponent": self.exponent}
 
 
-def _fill_contact(c: np.ndarray, *, a0: float, vdw: float, stiffness: float, p: float) -> None:
-    if c[L.CONTACT]:
-        raise ValueError("force: a model may hold only one contact law")
-    c[L.CONTACT] = 1.0
-    c[L.A0] = a0
-    c[L.VDW] += vdw
-    c[L.E_CONT] = stiffness
-    c[L.P_CONT] = p
+def dmt_law(*, a0: float, vdw: float, stiffness: float, p: float,
+            extra: tuple[Term, ...] = ()) -> ForceLaw:
+    """``-vdw max(z, a0)**-2 + stiffness delta**p [z <= a0]`` (plus ``extra`` terms)."""
+    terms = (Term(Kind.INVERSE_POWER, -vdw, 2.0), Term(Kind.INDENTATION, stiffness, p))
+    return ForceLaw(terms + extra, a0=a0, has_contact=True)
 
 
 def _dmt_reference(m: Any, z: np.ndarray, contact: np.ndarray) -> np.ndarray:

@@ -8,8 +8,8 @@ from typing import Any, final
 import numpy as np
 
 from .._scales import Scales
-from . import _layout as L
 from .base import AbstractForceModel, check_range
+from .law import ForceLaw, Kind, Term
 
 __all__ = ["Electrostatic"]
 
@@ -51,11 +51,8 @@ class Electrostatic(AbstractForceModel):
         strength = math.pi * EPSILON_0 * r**2 * v**2 / (scales.spring_constant * ell**3)
         return cls(strength=strength, radius=r / ell)
 
-    def _fill(self, c: np.ndarray) -> None:
-        if c[L.ES] != 0.0:
-            raise ValueError("force: only one electrostatic term per model")
-        c[L.ES] = self.strength
-        c[L.R_ES] = self.radius
+    def law(self) -> ForceLaw:
+        return ForceLaw((Term(Kind.SPHERE_ELECTROSTATIC, -self.strength, self.radius),))
 
     def _reference(self, z: np.ndarray, zdot: np.ndarray, contact: np.ndarray) -> np.ndarray:
         return -self.strength / (z * (z + self.radius))

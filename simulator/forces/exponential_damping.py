@@ -7,8 +7,8 @@ from typing import Any, final
 import numpy as np
 
 from .._scales import Scales
-from . import _layout as L
 from .base import AbstractForceModel, check_range
+from .law import ForceLaw, Kind, Term
 
 __all__ = ["ExponentialDamping"]
 
@@ -45,11 +45,8 @@ class ExponentialDamping(AbstractForceModel):
         return cls(coefficient=c * scales.omega0 / scales.spring_constant,
                    decay_length=zb / scales.length)
 
-    def _fill(self, c: np.ndarray) -> None:
-        if c[L.EXPD] != 0.0:
-            raise ValueError("force: only one exponential damping term per model")
-        c[L.EXPD] = self.coefficient
-        c[L.ZB] = self.decay_length
+    def law(self) -> ForceLaw:
+        return ForceLaw((Term(Kind.EXPONENTIAL_DAMPING, -self.coefficient, self.decay_length),))
 
     def _reference(self, z: np.ndarray, zdot: np.ndarray, contact: np.ndarray) -> np.ndarray:
         return -self.coefficient * np.exp(-z / self.decay_length) * zdot

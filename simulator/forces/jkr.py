@@ -9,7 +9,8 @@ import numpy as np
 
 from .._scales import Scales
 from .base import AbstractForceModel, check_range
-from .dmt import DMT, _dmt_reference, _fill_contact, dmt_coefficients_from_si
+from .dmt import DMT, _dmt_reference, dmt_coefficients_from_si, dmt_law
+from .law import ForceLaw
 
 __all__ = ["JKR"]
 
@@ -47,12 +48,8 @@ class JKR(AbstractForceModel):
             reduced_modulus_pa=reduced_modulus_pa, a0_m=a0_m, exponent=exponent,
             contact_coefficient=None, scales=scales))
 
-    @property
-    def a0(self) -> float:
-        return self._a0
-
-    def _fill(self, c: np.ndarray) -> None:
-        _fill_contact(c, a0=self._a0, vdw=self.vdw, stiffness=self.stiffness, p=self.exponent)
+    def law(self) -> ForceLaw:
+        return dmt_law(a0=self._a0, vdw=self.vdw, stiffness=self.stiffness, p=self.exponent)
 
     def _reference(self, z: np.ndarray, zdot: np.ndarray, contact: np.ndarray) -> np.ndarray:
         return _dmt_reference(self, z, contact)

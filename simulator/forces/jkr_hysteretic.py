@@ -9,8 +9,8 @@ import numpy as np
 from scipy.optimize import brentq
 
 from .._scales import Scales
-from . import _layout as L
 from .base import AbstractForceModel, check_range
+from .law import ForceLaw, Kind, Term
 
 __all__ = ["HystereticJKR"]
 
@@ -87,22 +87,14 @@ class HystereticJKR(AbstractForceModel):
         )
 
     @property
-    def a0(self) -> float:
-        return self._a0
-
-    @property
     def neck_radius_sqrt(self) -> float:
         """``s_m = sqrt(a)`` at the neck's stability limit."""
         return (self.c_j * self.r_j / 4.0) ** (1.0 / 3.0)
 
-    @property
-    def break_indentation(self) -> float:
-        return -0.75 * self.c_j * self.neck_radius_sqrt
-
     def contact_force(self, delta: float) -> float:
         """JKR force at indentation ``delta`` (scalar reference, via a bracketing root)."""
         s_m = self.neck_radius_sqrt
-        if delta <= self.break_indentation:
+        if delta <= -0.75 * self.c_j * s_m:
             s = s_m
         else:
             def g(s: float) -> float:
@@ -114,18 +106,12 @@ class HystereticJKR(AbstractForceModel):
             s = brentq(g, s_m, hi, xtol=1e-15, rtol=1e-14)
         return self.alpha * s**6 - self.beta * s**3
 
-    def _fill(self, c: np.ndarray) -> None:
-        if c[L.CONTACT]:
-            raise ValueError("force: a model may hold only one contact law")
-        c[L.CONTACT] = 1.0
-        c[L.A0] = self._a0
-        c[L.VDW] += self.vdw
-        c[L.JKR] = 1.0
-        c[L.JKR_ALPHA] = self.alpha
-        c[L.JKR_BETA] = self.beta
-        c[L.JKR_R] = self.r_j
-        c[L.JKR_C] = self.c_j
-        c[L.BREAK] = self.break_indentation
+    def law(self) -> ForceLaw:
+        terms = (Term(Kind.JKR_CUBE, self.alpha, self.r_j, self.c_j),
+                 Term(Kind.JKR_THREE_HALVES, -self.beta, self.r_j, self.c_j),
+                 Term(Kind.DETACHED_POWER, -self.vdw, 2.0))
+        return ForceLaw(terms, a0=self._a0, has_contact=True,
+                        break_distance=0.75 * self.c_j * self.neck_radius_sqrt)
 
     def _reference(self, z: np.ndarray, zdot: np.ndarray, contact: np.ndarray) -> np.ndarray:
         out = np.empty_like(z)

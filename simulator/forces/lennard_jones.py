@@ -7,8 +7,8 @@ from typing import Any, final
 import numpy as np
 
 from .._scales import Scales
-from . import _layout as L
 from .base import AbstractForceModel, check_range
+from .law import ForceLaw, Kind, Term
 
 __all__ = ["LennardJones"]
 
@@ -26,6 +26,7 @@ class LennardJones(AbstractForceModel):
     """
 
     name = "lj"
+    combines_with_contact = False
 
     def __init__(self, *, repulsion: float, attraction: float) -> None:
         self.repulsion = check_range("repulsion", repulsion, low=0.0)
@@ -42,9 +43,9 @@ class LennardJones(AbstractForceModel):
         k, ell = scales.spring_constant, scales.length
         return cls(repulsion=a1 * r / (180.0 * k * ell**9), attraction=a2 * r / (6.0 * k * ell**3))
 
-    def _fill(self, c: np.ndarray) -> None:
-        c[L.LJ_REP] += self.repulsion
-        c[L.VDW] += self.attraction
+    def law(self) -> ForceLaw:
+        return ForceLaw((Term(Kind.INVERSE_POWER, self.repulsion, 8.0),
+                         Term(Kind.INVERSE_POWER, -self.attraction, 2.0)))
 
     def _reference(self, z: np.ndarray, zdot: np.ndarray, contact: np.ndarray) -> np.ndarray:
         return self.repulsion / z**8 - self.attraction / z**2

@@ -7,6 +7,7 @@ from typing import Any, final
 import numpy as np
 
 from .base import AbstractForceModel
+from .law import ForceLaw
 
 __all__ = ["NoInteraction"]
 
@@ -17,8 +18,8 @@ class NoInteraction(AbstractForceModel):
 
     name = "none"
 
-    def _fill(self, c: np.ndarray) -> None:
-        return None
+    def law(self) -> ForceLaw:
+        return ForceLaw()
 
     def _reference(self, z: np.ndarray, zdot: np.ndarray, contact: np.ndarray) -> np.ndarray:
         return np.zeros_like(z)

@@ -7,8 +7,8 @@ from typing import Any, final
 import numpy as np
 
 from .._scales import Scales
-from . import _layout as L
 from .base import AbstractForceModel, check_range
+from .law import ForceLaw, Kind, Term
 
 __all__ = ["SphereVdW"]
 
@@ -47,11 +47,8 @@ class SphereVdW(AbstractForceModel):
         return cls(strength=2.0 * h * r**3 / (3.0 * scales.spring_constant * scales.length**2),
                    radius=r)
 
-    def _fill(self, c: np.ndarray) -> None:
-        if c[L.SPH] != 0.0 and c[L.R_SPH] != self.radius:
-            raise ValueError("radius: only one sphere van der Waals radius per model")
-        c[L.SPH] += self.strength
-        c[L.R_SPH] = self.radius
+    def law(self) -> ForceLaw:
+        return ForceLaw((Term(Kind.SPHERE_VDW, -self.strength, self.radius),))
 
     def _reference(self, z: np.ndarray, zdot: np.ndarray, contact: np.ndarray) -> np.ndarray:
         return -self.strength / (z**2 * (z + 2.0 * self.radius) ** 2)

@@ -7,9 +7,9 @@ from typing import Any, final
 import numpy as np
 
 from .._scales import Scales
-from . import _layout as L
 from .base import AbstractForceModel, check_range, clipped_pow
-from .dmt import DMT, _dmt_reference, _fill_contact
+from .dmt import DMT, _dmt_reference, dmt_law
+from .law import ForceLaw, Kind, Term
 
 __all__ = ["ViscoelasticDMT"]
 
@@ -71,17 +71,13 @@ class ViscoelasticDMT(AbstractForceModel):
         cv = eta * scales.length**q * scales.omega0 / scales.spring_constant
         return cls(**d.parameters(), viscosity=cv, viscosity_exponent=q)
 
-    @property
-    def a0(self) -> float:
-        return self._a0
-
-    def _fill(self, c: np.ndarray) -> None:
-        _fill_contact(c, a0=self._a0, vdw=self.vdw, stiffness=self.stiffness, p=self.exponent)
-        c[L.VISCO] = self.viscosity
-        c[L.Q_VISCO] = self.viscosity_exponent
+    def law(self) -> ForceLaw:
+        rate = Term(Kind.INDENTATION_RATE, self.viscosity, self.viscosity_exponent, 1.0)
+        return dmt_law(a0=self._a0, vdw=self.vdw, stiffness=self.stiffness, p=self.exponent,
+                       extra=(rate,))
 
     def _reference(self, z: np.ndarray, zdot: np.ndarray, contact: np.ndarray) -> np.ndarray:
-        rate = self.viscosity * clipped_pow(self.a0 - z, self.viscosity_exponent) * (-zdot)
+        rate = self.viscosity * clipped_pow(self._a0 - z, self.viscosity_exponent) * (-zdot)
         return _dmt_reference(self, z, contact) + np.where(contact, rate, 0.0)
 
     def parameters(self) -> dict[str, Any]:

@@ -1,24 +1,48 @@
-"""Compiled fixed-step RK4 with located contact events (the simulator's hot loop).
+"""The one compiled integrator: fixed-step RK4 with located force switches.
 
-State per trajectory: modal deflections ``q`` and velocities ``v`` (``n_modes`` each), the
-contact regime (0/1) and five work integrals, all dimensionless. Within one regime the
-right-hand side is smooth, so classical RK4 keeps its 4th order; a regime switch is located
-inside the step (cubic Hermite interpolant of the gap, then Newton on the RK4 sub-step) and
-the step is split there. Between events the stage at the end of a step is reused as the first
-stage of the next (FSAL), so a regular step costs four force evaluations.
+Used by the simulator (:class:`~simulator.integrate.RK4`), by the identifier's model
+simulation (``afmlearn.identify._simulate``) and by the diagnosis' shooting and held-out runs
+(``afmlearn.diagnose._kernel``). The force is a :class:`~simulator.forces.law.ForceLaw`
+evaluated by :func:`simulator.forces._kernel.law_force`.
+
+State per trajectory: modal deflections ``q`` and velocities ``v`` (``M`` modes), the regime
+``r`` and five work integrals, all dimensionless. ``r`` is 0 (free), 1 (contact, attached) or
+2 (attached beyond ``a0``: a neck that has not broken yet; only with ``geometric``, below).
+Contact-gated terms read ``contact = r != 0`` and the hysteretic ones ``attached = r != 0``
+(a JKR contact persists to its break), unless ``geometric``. The gap is
+``z = g0 + g' (tau - tau_0) - sum_i q_i - y_b sin(theta)`` and mode ``i`` obeys
+``q_i'' = dc_i cos(theta) + ds_i sin(theta) - D_i q_i' - K_i q_i - S_i F``,
+``theta = theta_0 + Omega (tau - tau_0)`` (tip or base excitation, 1--3 modes, an approach
+ramp). Force switches (contact onset ``z = a0`` either way; the neck or JKR break at
+``z = a0 + break_distance``) are located inside the step: cubic Hermite interpolant of the gap,
+then Newton on the RK4 sub-step, so the state after a switch depends smoothly on the state
+before it (as Newton shooting needs) and the step is split there. Between events the stage at
+the end of a step is reused as the first stage of the next (FSAL), so a regular step costs four
+force evaluations.
+
+Options (per call):
+
+* ``locate`` -- locate the switches (off: the regime never changes and contact-gated terms
+  read ``z <= a0`` at every stage, the identifier's plain fixed-step RK4);
+* ``geometric`` -- contact-gated terms read ``z <= a0`` at every stage instead of the carried
+  regime (the identifier's and the diagnosis' force convention; the regime then only carries
+  the neck);
+* ``grade`` -- graded steps at singular switches (below);
+* ``blowup`` -- a run whose ``|q_i|`` exceeds it ends in a NaN state and its output from the
+  interval that blew up on is NaN (checked after the run).
 
 Contact laws are weakly singular at the switch (``delta**1.5`` for Hertz, ``sqrt(delta)
 delta'`` for Kelvin--Voigt, ``sqrt(delta - delta_c)`` at a JKR neck), which would cut RK4's
-local error to ``O(h**1.5 .. h**2.5)``. Steps are therefore graded geometrically on the
-singular side of each switch: after entering contact the step grows as
+local error to ``O(h**1.5 .. h**2.5)``. With ``grade`` the steps are graded geometrically on
+the singular side of each switch: after entering contact the step grows as
 ``max(GRADE_MIN h, GRADE_RATIO * (tau - tau_event))`` until it reaches ``h``; while moving
-out of contact the step shrinks the same way with the estimated time to the break
-(``(z_break - z) / z'``), and the partial step that ends on the break is graded too. This costs
-some 60--80 extra steps per contact and removes most of the error constant.
+out of contact the step shrinks the same way with the estimated time to the switch
+(``(z_switch - z) / z'``), and the partial step that ends on the switch is graded too. This
+costs some 60--80 extra steps per contact and removes most of the error constant.
 
 Work integrals (``W``): 0 drive input ``int sum_i drive_i v_i``, 1 cantilever damping
 ``int sum_i D_i v_i**2``, 2 work done on the tip--sample force ``int F sum_i s_i v_i``,
-3 energy delivered to the sample ``-int F z'``, 4 time in contact.
+3 energy delivered to the sample ``-int F z'``, 4 time in contact (``r != 0``).
 """
 
 from __future__ import annotations
@@ -28,8 +52,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ..forces import _layout as L
-from ..forces._kernel import ts_force
+from ..forces._kernel import law_force
 
 N_WORK = 5
 MAX_EVENTS_PER_STEP = 16
@@ -37,26 +60,31 @@ EVENT_TOL = 1e-13
 #: graded steps near a contact switch: step = max(GRADE_MIN h, GRADE_RATIO * distance)
 GRADE_RATIO = 0.25
 GRADE_MIN = 1e-3
+#: regimes
+FREE, CONTACT, NECK = 0, 1, 2
+#: law header (``ForceLaw.header``): a0, has_contact, break_distance, gates_on_contact
+H_A0, H_CONTACT, H_BREAK, H_GATES = 0, 1, 2, 3
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def _rhs(q, v, M, tau, c, s, contact, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, tg, fp,
-         aq, pw):
+def _rhs(q, v, M, tau, c, s, r, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, kinds, p1, p2, cf,
+         a0, geometric, aq, pw):
     """Accelerations into ``aq`` and work rates into ``pw``; returns (z, zdot, F)."""
     x = 0.0
     xd = 0.0
     for i in range(M):
         x += q[i]
         xd += v[i]
-    z = g0 + gr * (tau - tg) - x - yb * s
+    z = g0 + gr * tau - x - yb * s
     zd = gr - xd - yb * om * c
-    f = ts_force(z, zd, contact, fp)
+    contact = z <= a0 if geometric else r != FREE
+    f = law_force(kinds, p1, p2, cf, a0, z, zd, x, contact, r != FREE)
     p_drive = 0.0
     p_damp = 0.0
     p_ts = 0.0
     for i in range(M):
         drive = dc[i] * c + ds[i] * s
-        d = Dcon[i] if contact != 0 else Dair[i]
+        d = Dcon[i] if r != FREE else Dair[i]
         aq[i] = drive - d * v[i] - K[i] * q[i] - S[i] * f
         p_drive += drive * v[i]
         p_damp += d * v[i] * v[i]
@@ -65,26 +93,26 @@ def _rhs(q, v, M, tau, c, s, contact, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, 
     pw[1] = p_damp
     pw[2] = p_ts
     pw[3] = -f * zd
-    pw[4] = 1.0 if contact != 0 else 0.0
+    pw[4] = 1.0 if r != FREE else 0.0
     return z, zd, f
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def _gap(q, v, M, tau, c, s, yb, om, g0, gr, tg):
+def _gap(q, v, M, tau, c, s, yb, om, g0, gr):
     x = 0.0
     xd = 0.0
     for i in range(M):
         x += q[i]
         xd += v[i]
-    return g0 + gr * (tau - tg) - x - yb * s, gr - xd - yb * om * c
+    return g0 + gr * tau - x - yb * s, gr - xd - yb * om * c
 
 
 @njit(cache=True, _nrt=False)
-def _rk4(q, v, W, M, tau, h, cm, sm, c1, s1, contact, K, Dair, Dcon, S, dc, ds, yb, om,
-         g0, gr, tg, fp, a1, p1, qn, vn, Wn, wk, pk):
+def _rk4(q, v, W, M, tau, h, cm, sm, c1, s1, r, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr,
+         kinds, p1, p2, cf, a0, geometric, a1, pa, qn, vn, Wn, wk, pk):
     """One classical RK4 step of length ``h`` for ``q' = v, v' = a(q, v, tau)``.
 
-    ``(a1, p1)`` is the first stage at ``(q, v, tau)``; drive cos/sin at the midpoint and the
+    ``(a1, pa)`` is the first stage at ``(q, v, tau)``; drive cos/sin at the midpoint and the
     end are passed in. The new state goes to ``(qn, vn, Wn)``. ``wk`` (8, M) and ``pk``
     (3, N_WORK) are scratch buffers.
     """
@@ -99,24 +127,24 @@ def _rk4(q, v, W, M, tau, h, cm, sm, c1, s1, contact, K, Dair, Dcon, S, dc, ds, 
     for i in range(M):
         qs[i] = q[i] + h2 * v[i]
         v2[i] = v[i] + h2 * a1[i]
-    _rhs(qs, v2, M, tau + h2, cm, sm, contact, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, tg, fp,
-         a2, pk[0])
+    _rhs(qs, v2, M, tau + h2, cm, sm, r, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, kinds, p1,
+         p2, cf, a0, geometric, a2, pk[0])
     for i in range(M):
         qs[i] = q[i] + h2 * v2[i]
         v3[i] = v[i] + h2 * a2[i]
-    _rhs(qs, v3, M, tau + h2, cm, sm, contact, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, tg, fp,
-         a3, pk[1])
+    _rhs(qs, v3, M, tau + h2, cm, sm, r, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, kinds, p1,
+         p2, cf, a0, geometric, a3, pk[1])
     for i in range(M):
         qs[i] = q[i] + h * v3[i]
         v4[i] = v[i] + h * a3[i]
-    _rhs(qs, v4, M, tau + h, c1, s1, contact, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, tg, fp,
-         a4, pk[2])
+    _rhs(qs, v4, M, tau + h, c1, s1, r, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, kinds, p1,
+         p2, cf, a0, geometric, a4, pk[2])
     h6 = h / 6.0
     for i in range(M):
         qn[i] = q[i] + h6 * (v[i] + 2.0 * v2[i] + 2.0 * v3[i] + v4[i])
         vn[i] = v[i] + h6 * (a1[i] + 2.0 * a2[i] + 2.0 * a3[i] + a4[i])
     for j in range(N_WORK):
-        Wn[j] = W[j] + h6 * (p1[j] + 2.0 * pk[0, j] + 2.0 * pk[1, j] + pk[2, j])
+        Wn[j] = W[j] + h6 * (pa[j] + 2.0 * pk[0, j] + 2.0 * pk[1, j] + pk[2, j])
 
 
 @njit(cache=True, inline="always", _nrt=False)
@@ -144,7 +172,7 @@ def _bisect(lo, hi, e0, e1, d0, d1, sgn):
     return hi
 
 
-@njit(cache=True, inline="always", _nrt=False)
+@njit(cache=True, _nrt=False)
 def _first_crossing(e0, e1, d0, d1, sgn):
     """First ``t`` in (0, 1] where ``sgn * e(t) < -EVENT_TOL`` on the Hermite cubic, or -1.
 
@@ -187,12 +215,13 @@ def _first_crossing(e0, e1, d0, d1, sgn):
 
 
 @njit(cache=True, _nrt=False)
-def _graded_to_end(q, v, W, M, tau, length, hmin, contact, K, Dair, Dcon, S, dc, ds, yb, om,
-                   g0, gr, tg, th0, fp, a1, p1, qe, ve, We, qg, vg, Wg, ag, pg, wk, pk):
+def _graded_to_end(q, v, W, M, tau, length, hmin, r, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr,
+                   th0, kinds, p1, p2, cf, a0, geometric, a1, pa, qe, ve, We, qg, vg, Wg, ag,
+                   pg, wk, pk):
     """Integrate from (q, v, W) at ``tau`` over ``length`` with steps shrinking geometrically
     towards the end (a singular point of the force); result in (qe, ve, We).
 
-    ``(a1, p1)`` is the first stage at the start (not modified).
+    ``(a1, pa)`` is the first stage at the start (not modified).
     """
     for i in range(M):
         qg[i] = q[i]
@@ -200,7 +229,7 @@ def _graded_to_end(q, v, W, M, tau, length, hmin, contact, K, Dair, Dcon, S, dc,
         ag[i] = a1[i]
     for j in range(N_WORK):
         Wg[j] = W[j]
-        pg[j] = p1[j]
+        pg[j] = pa[j]
     t = 0.0
     while True:
         d = length - t
@@ -208,12 +237,13 @@ def _graded_to_end(q, v, W, M, tau, length, hmin, contact, K, Dair, Dcon, S, dc,
             step = d
         else:
             step = max(hmin, GRADE_RATIO * d)
-        thm = th0 + om * (tau + t + 0.5 * step - tg)
-        th1 = th0 + om * (tau + t + step - tg)
+        thm = th0 + om * (tau + t + 0.5 * step)
+        th1 = th0 + om * (tau + t + step)
         c1 = math.cos(th1)
         s1 = math.sin(th1)
-        _rk4(qg, vg, Wg, M, tau + t, step, math.cos(thm), math.sin(thm), c1, s1, contact, K,
-             Dair, Dcon, S, dc, ds, yb, om, g0, gr, tg, fp, ag, pg, qe, ve, We, wk, pk)
+        _rk4(qg, vg, Wg, M, tau + t, step, math.cos(thm), math.sin(thm), c1, s1, r, K, Dair,
+             Dcon, S, dc, ds, yb, om, g0, gr, kinds, p1, p2, cf, a0, geometric, ag, pg, qe, ve,
+             We, wk, pk)
         t += step
         if step == d:
             return
@@ -222,26 +252,271 @@ def _graded_to_end(q, v, W, M, tau, length, hmin, contact, K, Dair, Dcon, S, dc,
             vg[i] = ve[i]
         for j in range(N_WORK):
             Wg[j] = We[j]
-        _rhs(qg, vg, M, tau + t, c1, s1, contact, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, tg,
-             fp, ag, pg)
+        _rhs(qg, vg, M, tau + t, c1, s1, r, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, kinds, p1,
+             p2, cf, a0, geometric, ag, pg)
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def _leave_surface(r, a0, brk, gates):
+    """Gap at which regime ``r`` (1 or 2) is left outward, and the regime after it."""
+    if r == CONTACT:
+        if brk == 0.0:
+            return a0, FREE
+        if gates:
+            return a0, NECK
+    return a0 + brk, FREE
+
+
+@njit(cache=True)
+def integrate_one(q, v, W, r, th0, om, dc, ds, yb, g0, gr, K, Dair, Dcon, S, kinds, p1, p2, cf,
+                  hdr, dt, n_samples, substeps, locate, geometric, grade, blowup, q_out, v_out,
+                  f_out, c_out, record_velocity):
+    """Integrate one trajectory over ``n_samples`` output samples; returns the final regime.
+
+    Parameters
+    ----------
+    q, v : float64 (M,)
+        Modal state at the start (updated in place to the end state; NaN after a blow-up).
+    W : float64 (N_WORK,)
+        Work integrals (accumulated in place).
+    r : int
+        Regime at the start (0 free, 1 contact, 2 neck).
+    th0, om : float
+        Drive phase at the start and drive frequency; time is kept relative to the start and
+        recomputed exactly at every sub-step boundary, so long runs do not drift the phase.
+    dc, ds : float64 (M,)
+        Modal drive ``dc cos(theta) + ds sin(theta)``.
+    yb : float
+        Base-motion amplitude entering the gap.
+    g0, gr : float
+        Rest gap at the start and its rate (approach ramp).
+    K, Dair, Dcon, S : float64 (M,)
+        Modal stiffness, damping out of/in contact, force gains.
+    kinds, p1, p2, cf : (n_terms,)
+        The force law's terms (``ForceLaw.arrays``).
+    hdr : float64 (4,)
+        ``ForceLaw.header()``.
+    dt : float
+        Output sample interval; the step is ``dt / substeps``.
+    locate, geometric, grade : bool; blowup : float
+        Options (module docstring).
+    q_out : float64 (M, n_samples); v_out : float64 (M, n_samples) or (M, 0)
+    f_out : float64 (n_samples,); c_out : int8 (n_samples,)
+        Recorded at ``k dt``, k = 0 .. n_samples - 1 (before each interval).
+    """
+    M = q.shape[0]
+    h = dt / substeps
+    a0 = hdr[H_A0]
+    has_contact = locate and hdr[H_CONTACT] != 0.0
+    brk = hdr[H_BREAK]
+    # a separate neck regime only where contact-gated terms read the gap (else r is 0 or 1)
+    gates = geometric and hdr[H_GATES] != 0.0
+    tau = 0.0
+    a1 = np.empty(M)
+    an = np.empty(M)
+    qn = np.empty(M)
+    vn = np.empty(M)
+    qe = np.empty(M)
+    ve = np.empty(M)
+    wk = np.empty((8, M))
+    pk = np.empty((3, N_WORK))
+    pa = np.empty(N_WORK)
+    pn = np.empty(N_WORK)
+    qg = np.empty(M)
+    vg = np.empty(M)
+    ag = np.empty(M)
+    Wg = np.empty(N_WORK)
+    pg = np.empty(N_WORK)
+    Wn = np.empty(N_WORK)
+    We = np.empty(N_WORK)
+    hmin = GRADE_MIN * h
+    grade_span = h / GRADE_RATIO if grade else -1.0
+    tau_ev = -1e300  # time of the last entry into contact
+    chh = math.cos(0.5 * om * h)
+    shh = math.sin(0.5 * om * h)
+    th = th0
+    c = math.cos(th)
+    s = math.sin(th)
+    z, zd, f = _rhs(q, v, M, tau, c, s, r, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, kinds, p1,
+                    p2, cf, a0, geometric, a1, pa)
+    for k in range(n_samples):
+        for i in range(M):
+            q_out[i, k] = q[i]
+        if record_velocity:
+            for i in range(M):
+                v_out[i, k] = v[i]
+        f_out[k] = f
+        c_out[k] = r
+        # drive cos/sin advance by rotation; re-synchronised exactly every 64 samples
+        if k % 64 == 0:
+            th = th0 + om * (k * dt)
+            c = math.cos(th)
+            s = math.sin(th)
+        for _sub in range(substeps):
+            tau = (k * substeps + _sub) * h
+            t_end = tau + h
+            n_ev = 0
+            fresh = True  # nothing integrated yet in this sub-step: hh == h exactly
+            while True:
+                hh = t_end - tau
+                if hh <= 0.0:
+                    break
+                full = True
+                if grade:
+                    dist = tau - tau_ev
+                    if r == CONTACT and zd > 0.0:
+                        # approaching the switch out of contact: estimated time to it
+                        zl, _ = _leave_surface(r, a0, brk, gates)
+                        dist = min(dist, (zl - z) / zd)
+                    if dist < grade_span:
+                        gh = max(hmin, GRADE_RATIO * max(dist, 0.0))
+                        if gh < hh:
+                            hh = gh
+                            full = False
+                if full and fresh:
+                    cm = c * chh - s * shh
+                    sm = s * chh + c * shh
+                    c1 = cm * chh - sm * shh
+                    s1 = sm * chh + cm * shh
+                else:
+                    thm = th0 + om * (tau + 0.5 * hh)
+                    th1 = th0 + om * (tau + hh)
+                    cm = math.cos(thm)
+                    sm = math.sin(thm)
+                    c1 = math.cos(th1)
+                    s1 = math.sin(th1)
+                _rk4(q, v, W, M, tau, hh, cm, sm, c1, s1, r, K, Dair, Dcon, S, dc, ds, yb, om,
+                     g0, gr, kinds, p1, p2, cf, a0, geometric, a1, pa, qn, vn, Wn, wk, pk)
+                z1, zd1, f1 = _rhs(qn, vn, M, tau + hh, c1, s1, r, K, Dair, Dcon, S, dc, ds, yb,
+                                   om, g0, gr, kinds, p1, p2, cf, a0, geometric, an, pn)
+                fresh = False
+                t_ev = -1.0
+                zsw = 0.0
+                r_new = r
+                if has_contact and n_ev < MAX_EVENTS_PER_STEP:
+                    if r == FREE or r == NECK:
+                        t_ev = _first_crossing(z - a0, z1 - a0, zd * hh, zd1 * hh, 1.0)
+                        zsw = a0
+                        r_new = CONTACT
+                    if r != FREE:
+                        zl, rl = _leave_surface(r, a0, brk, gates)
+                        tl = _first_crossing(z - zl, z1 - zl, zd * hh, zd1 * hh, -1.0)
+                        if tl >= 0.0 and (t_ev < 0.0 or tl < t_ev):
+                            t_ev = tl
+                            zsw = zl
+                            r_new = rl
+                if t_ev < 0.0:
+                    for i in range(M):
+                        q[i] = qn[i]
+                        v[i] = vn[i]
+                        a1[i] = an[i]
+                    for j in range(N_WORK):
+                        W[j] = Wn[j]
+                        pa[j] = pn[j]
+                    tau = tau + hh
+                    c = c1
+                    s = s1
+                    z = z1
+                    zd = zd1
+                    f = f1
+                    if full:
+                        break
+                    continue
+                # ---- event: locate it on the RK4 map, switch regime, continue
+                n_ev += 1
+                hs = t_ev * hh
+                for _it in range(4):
+                    th1 = th0 + om * (tau + hs)
+                    c1e = math.cos(th1)
+                    s1e = math.sin(th1)
+                    if grade and r == CONTACT:
+                        # leaving contact: the force is singular at the switch
+                        _graded_to_end(q, v, W, M, tau, hs, hmin, r, K, Dair, Dcon, S, dc, ds,
+                                       yb, om, g0, gr, th0, kinds, p1, p2, cf, a0, geometric,
+                                       a1, pa, qe, ve, We, qg, vg, Wg, ag, pg, wk, pk)
+                    else:
+                        thm = th0 + om * (tau + 0.5 * hs)
+                        _rk4(q, v, W, M, tau, hs, math.cos(thm), math.sin(thm), c1e, s1e, r, K,
+                             Dair, Dcon, S, dc, ds, yb, om, g0, gr, kinds, p1, p2, cf, a0,
+                             geometric, a1, pa, qe, ve, We, wk, pk)
+                    ze, zde = _gap(qe, ve, M, tau + hs, c1e, s1e, yb, om, g0, gr)
+                    err = ze - zsw
+                    if abs(err) < 1e-14 or zde == 0.0:
+                        break
+                    hn = hs - err / zde
+                    if hn <= 0.0 or hn > hh:
+                        break
+                    hs = hn
+                for i in range(M):
+                    q[i] = qe[i]
+                    v[i] = ve[i]
+                for j in range(N_WORK):
+                    W[j] = We[j]
+                tau = tau + hs
+                c = c1e
+                s = s1e
+                r = r_new
+                if r == CONTACT:
+                    tau_ev = tau
+                z, zd, f = _rhs(q, v, M, tau, c, s, r, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr,
+                                kinds, p1, p2, cf, a0, geometric, a1, pa)
+            # after a graded or split step, c and s are exact at tau
+    if blowup < np.inf:
+        _blown(q, v, q_out, blowup, 0, n_samples, f_out, v_out, record_velocity)
+    return r
+
+
+@njit(cache=True, _nrt=False)
+def _blown(q, v, q_out, blowup, k0, k, f_out, v_out, record_velocity):
+    """Blow-up check after a run (an exit from the sample loop costs ~40 % of a step).
+
+    The state at sample ``j`` is ``q_out[:, j]`` (``j < k``) or ``q`` (``j = k``). If one in
+    ``(k0, k]`` has ``|q_i| >= blowup`` (or NaN), the output from sample ``j - 1`` on (the
+    interval that blew up) is set to NaN, as are ``q`` and ``v``; returns True.
+    """
+    M = q.shape[0]
+    ok = True
+    for i in range(M):
+        if not abs(q[i]) < blowup:
+            ok = False
+    if ok:
+        return False
+    first = k
+    for j in range(max(k0 + 1, 1), k):
+        bad = False
+        for i in range(M):
+            if not abs(q_out[i, j]) < blowup:
+                bad = True
+        if bad:
+            first = j
+            break
+    n = f_out.shape[0]
+    for kk in range(first - 1, n):
+        f_out[kk] = math.nan
+        for i in range(M):
+            q_out[i, kk] = math.nan
+            if record_velocity:
+                v_out[i, kk] = math.nan
+    for i in range(M):
+        q[i] = math.nan
+        v[i] = math.nan
+    return True
 
 
 @njit(cache=True, parallel=True)
-def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, grate, K,
-                      Dair, Dcon, S, fp, W, dt, n_samples, substeps, q_out, v_out, f_out, c_out,
-                      record_velocity):
-    """Integrate ``B`` trajectories over ``n_samples`` output samples, in place.
+def integrate_segment(q0, v0, regime0, tau0, theta0, omega, dc, ds, ybase, g0, grate, K,
+                      Dair, Dcon, S, kinds, p1, p2, cf, hdr, W, dt, n_samples, substeps,
+                      q_out, v_out, f_out, c_out, record_velocity):
+    """Integrate ``B`` trajectories (the simulator's batch) over ``n_samples``, in place.
 
     Parameters
     ----------
     q0, v0 : float64 (B, M)
         Modal state at the segment start (updated to the end state).
-    contact0 : int8 (B,)
-        Contact regime (updated).
+    regime0 : int8 (B,)
+        Regime (updated).
     tau0 : float64 (B,)
-        Start time (updated to the end time). Inside, time is kept relative to the segment
-        start and recomputed exactly at every sub-step boundary, so long runs do not drift the
-        drive phase.
+        Start time (updated to the end time).
     theta0 : float64 (B,)
         Drive phase at ``tau0`` (updated, wrapped to [0, 2 pi)).
     omega : float64 (B,)
@@ -251,11 +526,13 @@ def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, 
     ybase : float64 (B,)
         Base-motion amplitude entering the gap.
     g0, grate : float64 (B,)
-        Rest gap at ``tau0`` and its rate (approach ramp).
+        Rest gap at ``tau0`` (updated) and its rate (approach ramp).
     K, Dair, Dcon, S : float64 (B, M)
         Modal stiffness, damping out of/in contact, force gains.
-    fp : float64 (B, N_COEFFICIENTS)
-        Canonical force coefficients.
+    kinds, p1, p2, cf : (B, T)
+        Force laws, zero-padded (``simulator.forces.law.pack_laws``).
+    hdr : float64 (B, 4)
+        Law headers.
     W : float64 (B, N_WORK)
         Work integrals (accumulated).
     dt : float
@@ -264,175 +541,23 @@ def integrate_segment(q0, v0, contact0, tau0, theta0, omega, dc, ds, ybase, g0, 
     f_out : float64 (B, n_samples); c_out : int8 (B, n_samples)
         Recorded at ``tau0 + k dt``, k = 0 .. n_samples - 1 (before each interval).
     """
-    B, M = q0.shape
-    h = dt / substeps
+    B = q0.shape[0]
     for b in prange(B):
         q = q0[b].copy()
         v = v0[b].copy()
         Wb = W[b].copy()
-        contact = np.int64(contact0[b])
-        tau = 0.0  # time relative to the segment start (exact at sub-step boundaries)
-        tg = 0.0
-        th0 = theta0[b]
-        om = omega[b]
-        yb = ybase[b]
-        gg = g0[b]
-        gr = grate[b]
-        Kb = K[b]
-        Da = Dair[b]
-        Dc = Dcon[b]
-        Sb = S[b]
-        dcb = dc[b]
-        dsb = ds[b]
-        fpb = fp[b]
-        has_contact = fpb[L.CONTACT] != 0.0
-        a0 = fpb[L.A0]
-        brk = fpb[L.BREAK]
-        a1 = np.empty(M)
-        an = np.empty(M)
-        qn = np.empty(M)
-        vn = np.empty(M)
-        qe = np.empty(M)
-        ve = np.empty(M)
-        wk = np.empty((8, M))
-        pk = np.empty((3, N_WORK))
-        p1 = np.empty(N_WORK)
-        pn = np.empty(N_WORK)
-        qg = np.empty(M)
-        vg = np.empty(M)
-        ag = np.empty(M)
-        Wg = np.empty(N_WORK)
-        pg = np.empty(N_WORK)
-        hmin = GRADE_MIN * h
-        grade_span = h / GRADE_RATIO
-        tau_ev = -1e300  # time of the last entry into contact
-        Wn = np.empty(N_WORK)
-        We = np.empty(N_WORK)
-        chh = math.cos(0.5 * om * h)
-        shh = math.sin(0.5 * om * h)
-        th = th0
-        c = math.cos(th)
-        s = math.sin(th)
-        z, zd, f = _rhs(q, v, M, tau, c, s, contact, Kb, Da, Dc, Sb, dcb, dsb, yb, om, gg, gr, tg,
-                        fpb, a1, p1)
-        for k in range(n_samples):
-            for i in range(M):
-                q_out[b, i, k] = q[i]
-            if record_velocity:
-                for i in range(M):
-                    v_out[b, i, k] = v[i]
-            f_out[b, k] = f
-            c_out[b, k] = contact
-            # drive cos/sin advance by rotation; re-synchronised exactly every 64 samples
-            if k % 64 == 0:
-                th = th0 + om * (k * dt)
-                c = math.cos(th)
-                s = math.sin(th)
-            for _sub in range(substeps):
-                tau = (k * substeps + _sub) * h
-                t_end = tau + h
-                n_ev = 0
-                fresh = True  # nothing integrated yet in this sub-step: hh == h exactly
-                while True:
-                    hh = t_end - tau
-                    if hh <= 0.0:
-                        break
-                    full = True
-                    dist = tau - tau_ev
-                    if contact == 1 and zd > 0.0:
-                        # approaching a break: estimated time to it (linear in z)
-                        dist = min(dist, (a0 - brk - z) / zd)
-                    if dist < grade_span:
-                        gh = max(hmin, GRADE_RATIO * max(dist, 0.0))
-                        if gh < hh:
-                            hh = gh
-                            full = False
-                    if full and fresh:
-                        cm = c * chh - s * shh
-                        sm = s * chh + c * shh
-                        c1 = cm * chh - sm * shh
-                        s1 = sm * chh + cm * shh
-                    else:
-                        thm = th0 + om * (tau + 0.5 * hh - tg)
-                        th1 = th0 + om * (tau + hh - tg)
-                        cm = math.cos(thm)
-                        sm = math.sin(thm)
-                        c1 = math.cos(th1)
-                        s1 = math.sin(th1)
-                    _rk4(q, v, Wb, M, tau, hh, cm, sm, c1, s1, contact, Kb, Da, Dc, Sb,
-                         dcb, dsb, yb, om, gg, gr, tg, fpb, a1, p1, qn, vn, Wn, wk, pk)
-                    z1, zd1, f1 = _rhs(qn, vn, M, tau + hh, c1, s1, contact, Kb, Da, Dc, Sb, dcb,
-                                       dsb, yb, om, gg, gr, tg, fpb, an, pn)
-                    fresh = False
-                    t_ev = -1.0
-                    if has_contact and n_ev < MAX_EVENTS_PER_STEP:
-                        zsw = a0 if contact == 0 else a0 - brk
-                        sgn = 1.0 if contact == 0 else -1.0
-                        t_ev = _first_crossing(z - zsw, z1 - zsw, zd * hh, zd1 * hh, sgn)
-                    if t_ev < 0.0:
-                        for i in range(M):
-                            q[i] = qn[i]
-                            v[i] = vn[i]
-                            a1[i] = an[i]
-                        for j in range(N_WORK):
-                            Wb[j] = Wn[j]
-                            p1[j] = pn[j]
-                        tau = tau + hh
-                        c = c1
-                        s = s1
-                        z = z1
-                        zd = zd1
-                        f = f1
-                        if full:
-                            break
-                        continue
-                    # ---- event: locate it on the RK4 map, switch regime, continue
-                    n_ev += 1
-                    zsw = a0 if contact == 0 else a0 - brk
-                    hs = t_ev * hh
-                    for _it in range(4):
-                        th1 = th0 + om * (tau + hs - tg)
-                        c1e = math.cos(th1)
-                        s1e = math.sin(th1)
-                        if contact == 1:
-                            # leaving contact: the force is singular at the break point
-                            _graded_to_end(q, v, Wb, M, tau, hs, hmin, contact, Kb, Da, Dc, Sb,
-                                           dcb, dsb, yb, om, gg, gr, tg, th0, fpb, a1, p1, qe,
-                                           ve, We, qg, vg, Wg, ag, pg, wk, pk)
-                        else:
-                            thm = th0 + om * (tau + 0.5 * hs - tg)
-                            _rk4(q, v, Wb, M, tau, hs, math.cos(thm), math.sin(thm), c1e, s1e,
-                                 contact, Kb, Da, Dc, Sb, dcb, dsb, yb, om, gg, gr, tg, fpb, a1,
-                                 p1, qe, ve, We, wk, pk)
-                        ze, zde = _gap(qe, ve, M, tau + hs, c1e, s1e, yb, om, gg, gr, tg)
-                        err = ze - zsw
-                        if abs(err) < 1e-14 or zde == 0.0:
-                            break
-                        hn = hs - err / zde
-                        if hn <= 0.0 or hn > hh:
-                            break
-                        hs = hn
-                    for i in range(M):
-                        q[i] = qe[i]
-                        v[i] = ve[i]
-                    for j in range(N_WORK):
-                        Wb[j] = We[j]
-                    tau = tau + hs
-                    c = c1e
-                    s = s1e
-                    contact = 1 - contact
-                    if contact == 1:
-                        tau_ev = tau
-                    z, zd, f = _rhs(q, v, M, tau, c, s, contact, Kb, Da, Dc, Sb, dcb, dsb, yb, om,
-                                    gg, gr, tg, fpb, a1, p1)
-                # after a graded or split step, c and s are exact at tau
-        for i in range(M):
+        r = integrate_one(q, v, Wb, np.int64(regime0[b]), theta0[b], omega[b], dc[b], ds[b],
+                          ybase[b], g0[b], grate[b], K[b], Dair[b], Dcon[b], S[b], kinds[b],
+                          p1[b], p2[b], cf[b], hdr[b], dt, n_samples, substeps, True, False,
+                          True, np.inf, q_out[b], v_out[b], f_out[b], c_out[b],
+                          record_velocity)
+        for i in range(q.shape[0]):
             q0[b, i] = q[i]
             v0[b, i] = v[i]
         for j in range(N_WORK):
             W[b, j] = Wb[j]
-        contact0[b] = contact
+        regime0[b] = r
         t_total = n_samples * dt
-        theta0[b] = (th0 + om * t_total) % (2.0 * math.pi)
-        g0[b] = gg + gr * t_total
+        theta0[b] = (theta0[b] + omega[b] * t_total) % (2.0 * math.pi)
+        g0[b] = g0[b] + grate[b] * t_total
         tau0[b] = tau0[b] + t_total

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..forces import _layout as L
+from ..forces.law import pack_laws
 from ..system import System
 from .state import Segment, State
 
@@ -22,9 +22,10 @@ def pack(systems: Sequence[System], omega: np.ndarray) -> dict[str, np.ndarray]:
     out = {
         "dc": np.zeros((b, m)), "ds": np.zeros((b, m)), "ybase": np.zeros(b),
         "K": np.zeros((b, m)), "Dair": np.zeros((b, m)), "Dcon": np.zeros((b, m)),
-        "S": np.zeros((b, m)), "fp": np.zeros((b, L.N_COEFFICIENTS)),
+        "S": np.zeros((b, m)),
     }
-    cache: dict[int, np.ndarray] = {}
+    cache: dict[int, object] = {}
+    laws = []
     for i, s in enumerate(systems):
         cl = s.cantilever
         out["dc"][i], out["ds"][i] = s.excitation.modal_drive(cl, float(omega[i]))
@@ -33,8 +34,9 @@ def pack(systems: Sequence[System], omega: np.ndarray) -> dict[str, np.ndarray]:
         out["Dcon"][i], out["S"][i] = cl.contact_damping, cl.force_gain
         key = id(s.force)
         if key not in cache:
-            cache[key] = s.force.coefficients()
-        out["fp"][i] = cache[key]
+            cache[key] = s.force.law()
+        laws.append(cache[key])
+    out["kinds"], out["p1"], out["p2"], out["coefs"], out["header"] = pack_laws(laws)
     return out
 
 

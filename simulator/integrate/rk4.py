@@ -8,7 +8,7 @@ from typing import final
 
 import numpy as np
 
-from ..forces import _layout as L
+from ..forces.law import ForceLaw, Kind
 from ..system import System
 from ._kernel import integrate_segment
 from .base import AbstractIntegrator
@@ -44,20 +44,8 @@ class RK4(AbstractIntegrator):
             return self.substeps
         w = float(np.max(omega))
         for s in systems:
-            w = max(w, float(np.sqrt(s.cantilever.stiffness[-1])))
-            c = s.force.coefficients()
-            if c[L.CONTACT] and not c[L.JKR]:
-                # contact stiffness at an indentation of 10 % of the gap
-                kc = c[L.E_CONT] * c[L.P_CONT] * 0.1 ** (c[L.P_CONT] - 1.0)
-                w = max(w, math.sqrt(float(s.cantilever.stiffness[-1]) + kc))
-            elif c[L.JKR]:
-                w = max(w, math.sqrt(1.0 + c[L.JKR_ALPHA] * c[L.JKR_R] ** 1.5))
-            if c[L.LJ_REP] > 0.0:
-                # wall stiffness 6 c_a / z*^3 where repulsion balances attraction, x4 for
-                # taps that push further into the wall
-                ca = max(c[L.VDW], 1e-3)
-                zs = (c[L.LJ_REP] / ca) ** (1.0 / 6.0)
-                w = max(w, math.sqrt(1.0 + 24.0 * ca / zs**3))
+            k_last = float(s.cantilever.stiffness[-1])
+            w = max(w, math.sqrt(k_last), _contact_frequency(s.force.law(), k_last))
         return max(1, math.ceil(self.steps_per_period * dt * w / (2.0 * math.pi)))
 
     def _advance(self, state: State, arrays, omega, gap_rate, dt, n_samples, substeps, out,
@@ -65,8 +53,30 @@ class RK4(AbstractIntegrator):
         integrate_segment(
             state.q, state.v, state.contact, state.tau, state.theta, omega, arrays["dc"],
             arrays["ds"], arrays["ybase"], state.gap, gap_rate, arrays["K"], arrays["Dair"],
-            arrays["Dcon"], arrays["S"], arrays["fp"], state.work, dt, n_samples, substeps,
+            arrays["Dcon"], arrays["S"], arrays["kinds"], arrays["p1"], arrays["p2"],
+            arrays["coefs"], arrays["header"], state.work, dt, n_samples, substeps,
             out["q"], out["v"], out["force"], out["contact"], record_velocity)
 
     def __repr__(self) -> str:
         return f"RK4(substeps={self.substeps!r}, steps_per_period={self.steps_per_period})"
+
+
+def _contact_frequency(law: ForceLaw, k_last: float) -> float:
+    """Angular frequency of the stiffened oscillation in contact (0 without a wall)."""
+    w = 0.0
+    if law.has_contact:
+        for t in law.terms:
+            if t.kind == Kind.INDENTATION:
+                # contact stiffness at an indentation of 10 % of the gap
+                kc = t.coef * t.p1 * 0.1 ** (t.p1 - 1.0)
+                w = max(w, math.sqrt(k_last + kc))
+            elif t.kind == Kind.JKR_CUBE:
+                w = max(w, math.sqrt(1.0 + t.coef * t.p1**1.5))
+    rep = law.coefficient(Kind.INVERSE_POWER, 8.0)
+    if rep > 0.0:
+        # wall stiffness 6 c_a / z*^3 where repulsion balances attraction, x4 for taps that
+        # push further into the wall
+        ca = max(-law.coefficient(Kind.INVERSE_POWER, 2.0), 1e-3)
+        zs = (rep / ca) ** (1.0 / 6.0)
+        w = max(w, math.sqrt(1.0 + 24.0 * ca / zs**3))
+    return w

@@ -26,7 +26,7 @@ class State:
     q, v : ndarray, shape (B, n_modes)
         Modal deflections (towards the sample) and velocities ``dq/dtau``.
     contact : ndarray of int8, shape (B,)
-        Contact regime (history state; 1 in contact).
+        Contact regime (history state; 1 in contact, 0 free; see ``_kernel``).
     tau : ndarray, shape (B,)
         Time.
     theta : ndarray, shape (B,)

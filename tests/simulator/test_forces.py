@@ -25,7 +25,7 @@ from simulator.forces import (
     SphereVdW,
     ViscoelasticDMT,
 )
-from simulator.forces._kernel import ts_force
+from simulator.forces._kernel import law_force
 
 FORCE_UNIT = 4e-7  # k L_ref [N]
 CONTACT_MODELS = [n for n, m in FORCE_MODELS.items() if m.has_contact]
@@ -34,13 +34,16 @@ RATE_MODELS = ["visco", "visco_q1", "dmt+expdamp", "jkr_hysteretic+expdamp", "su
 
 
 def kernel(model: AbstractForceModel, z, zdot, contact) -> np.ndarray:
-    """The compiled ``ts_force`` evaluated point by point."""
-    c = model.coefficients()
+    """The compiled ``law_force`` of ``model.law()`` evaluated point by point (the simulator's
+    carried regime: ``contact == attached``)."""
+    law = model.law()
+    kinds, p1, p2, c = law.arrays
     z, zdot, contact = np.broadcast_arrays(np.asarray(z, float), np.asarray(zdot, float),
                                            np.asarray(contact, bool))
     out = np.empty(z.shape)
     for i in np.ndindex(z.shape):
-        out[i] = ts_force(float(z[i]), float(zdot[i]), int(contact[i]), c)
+        out[i] = law_force(kinds, p1, p2, c, law.a0, float(z[i]), float(zdot[i]), 0.0,
+                           bool(contact[i]), bool(contact[i]))
     return out
 
 
@@ -72,6 +75,22 @@ def test_kernel_matches_reference(name: str) -> None:
     fast = kernel(model, z, zdot, contact)
     scale = max(np.max(np.abs(ref)), 1e-300)
     np.testing.assert_allclose(fast, ref, rtol=1e-12, atol=1e-13 * scale)
+
+
+def test_repeated_terms_add() -> None:
+    """The term list holds repeated families the old fixed coefficient vector refused: two
+    electrostatic spheres, two damping lengths, two van der Waals radii on one DMT contact."""
+    m = (_dmt() + Electrostatic(strength=0.01, radius=1.0) + Electrostatic(strength=0.02,
+                                                                           radius=3.0)
+         + ExponentialDamping(coefficient=0.1, decay_length=0.1)
+         + ExponentialDamping(coefficient=0.2, decay_length=0.5)
+         + SphereVdW(strength=1e-3, radius=1.0) + SphereVdW(strength=2e-3, radius=2.0))
+    z, zdot, contact = physical_points(m)
+    parts = [t(np.where(contact, m.a0, z) if t.saturates_in_contact else z, zdot, contact)
+             for t in m.terms]
+    np.testing.assert_allclose(kernel(m, z, zdot, contact), np.sum(parts, axis=0),
+                               rtol=1e-12, atol=1e-15)
+    assert m.law().n_terms == 8 and m.dissipative
 
 
 @pytest.mark.parametrize("name", list(FORCE_MODELS))
@@ -337,10 +356,6 @@ INVALID = [
     ("terms", lambda: LennardJones(repulsion=1e-6, attraction=0.01) + _dmt()),
     ("terms", lambda: _hj() + LennardJones(repulsion=1e-6, attraction=0.01)),
     ("force", lambda: _dmt() + JKR(**DMT_PARAMS)),
-    ("force", lambda: Electrostatic(strength=1, radius=1) + Electrostatic(strength=1, radius=1)),
-    ("force", lambda: (ExponentialDamping(coefficient=1.0, decay_length=1.0)
-                       + ExponentialDamping(coefficient=1.0, decay_length=1.0))),
-    ("radius", lambda: SphereVdW(strength=1, radius=1) + SphereVdW(strength=1, radius=2)),
     ("tip_radius_m", lambda: DMT.from_si(hamaker_j=1e-19, **{**SI, "tip_radius_m": 0.0})),
     ("reduced_modulus_pa", lambda: DMT.from_si(hamaker_j=1e-19,
                                                **{**SI, "reduced_modulus_pa": -1.0})),

@@ -45,6 +45,16 @@ def test_kernel_matches_numpy_reference(j):
     np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-300)
 
 
+def test_library_codes_are_the_simulator_force_law_codes():
+    """The library encodes its terms in the simulator's one force-law representation: every
+    library family code names the same family there (the compiled evaluator is shared)."""
+    from afmlearn.identify.library.base import Kind as LibKind
+    from simulator.forces import Kind
+
+    codes = {k: v for k, v in vars(LibKind).items() if k.isupper()}
+    assert codes and all(getattr(Kind, k) == v for k, v in codes.items())
+
+
 @pytest.mark.parametrize("term", [t for t in LIB if t.potential(_orbit()) is not None],
                          ids=lambda t: t.name)
 def test_potential_is_an_exact_antiderivative(term):
