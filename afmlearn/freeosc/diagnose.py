@@ -10,10 +10,11 @@
    what is predicted is everything else: offset and harmonics, from coefficients fitted on
    the first span. ``gain = 1 - NRMSE(cause) / NRMSE(baseline)`` on the held-out span
    (design.md section 4);
-3. the cause named: the largest held-out gain, if above ``min_gain``; then every other cause
-   is tested on top of it (step by step, the same held-out rule);
-4. evidence independent of those fits (`afmlearn.freeosc.evidence`) on the per-block
-   harmonics (`track_harmonics`).
+3. evidence independent of those fits (`afmlearn.freeosc.evidence`) on the per-block
+   harmonics (`track_harmonics`); a candidate the evidence rules out physically (`_excluded`)
+   is not named;
+4. the cause named: the largest held-out gain, if above ``min_gain``; then every other cause
+   is tested on top of it (step by step, the same held-out rule).
 
 Nothing here needs the spring constant, the detector sensitivity or the gap: the
 calibration-free quantities are ratios (``|X_n| / |X_1|``), exponents, phases and gains. The
@@ -65,6 +66,9 @@ MIN_GAIN = 0.05
 #: a further cause is added in the step-by-step naming when it lowers the held-out NRMSE of
 #: the model before it by at least this fraction
 MIN_STEP_GAIN = 0.02
+#: a physically required frequency drift beyond this multiple of the measured one excludes a
+#: candidate (see `_excluded`)
+_FREQUENCY_MARGIN = 10.0
 #: relative line amplitude above which a non-harmonic peak becomes a higher-mode candidate
 _MODE_LINE = 1e-3
 
@@ -87,7 +91,8 @@ class FreeOscillationDiagnosis:
         Held-out NRMSE of the baseline and of that model.
     candidates : list of dict
         Every cause alone: ``cause``, ``model`` (class), ``equation``, ``gain``,
-        ``heldout_nrmse``, ``coef``.
+        ``heldout_nrmse``, ``coef``, ``excluded`` (why the evidence rules it out, "" if
+        not: such a candidate is neither named nor the runner-up).
     causes : list of dict
         Step by step: ``cause``, ``model``, ``gain`` (over the model before it).
     evidence : dict
@@ -142,11 +147,14 @@ class FreeOscillationDiagnosis:
 
 
 def default_causes(y: ArrayLike, demod: Demodulation, *, sample_rate_hz: float,
-                   quality_factor: float = math.inf) -> list[AbstractCause]:
+                   quality_factor: float = math.inf, detector_order: int = 4
+                   ) -> list[AbstractCause]:
     """The causes tested by default; a higher mode only when a non-harmonic line is seen and
-    quantisation only when the record is quantised."""
+    quantisation only when the record is quantised. The detector map goes to ``x^4`` by
+    default (a smooth map's next term; a cubic map cannot make a 4th harmonic)."""
     causes: list[AbstractCause] = [
-        DetectorNonlinearity(), AcBiasDrive(), GapModulatedForce(quality_factor=quality_factor),
+        DetectorNonlinearity(order=detector_order), AcBiasDrive(),
+        GapModulatedForce(quality_factor=quality_factor),
         DuffingStiffness(quality_factor=quality_factor)]
     peak = non_harmonic_peak(y, sample_rate_hz=sample_rate_hz, carrier_hz=demod.carrier_hz,
                              exclude_hz=2 * demod.cutoff_hz)
@@ -233,7 +241,11 @@ def diagnose_free(y: ArrayLike, *, sample_rate_hz: float, heldout_fraction: floa
                            "equation": cause.equation, "gain": 1.0 - err / base,
                            "heldout_nrmse": err, "coef": cause.coef_.tolist(),
                            "_obj": cause})
-    ranked = sorted(candidates, key=lambda c: -c["gain"])
+    track = track_harmonics(y, demod, n_harmonics=n_h, block_periods=block_periods)
+    evidence = _evidence(y, demod, track, candidates, sample_rate_hz=sample_rate_hz)
+    for c in candidates:
+        c["excluded"] = _excluded(c, evidence)
+    ranked = sorted((c for c in candidates if not c["excluded"]), key=lambda c: -c["gain"])
     steps: list[dict[str, Any]] = []
     current, current_err = None, base
     if ranked and ranked[0]["gain"] >= min_gain:
@@ -263,8 +275,6 @@ def diagnose_free(y: ArrayLike, *, sample_rate_hz: float, heldout_fraction: floa
         c.pop("_obj")
     model = Combined(current) if current else LinearLever()
     model.fit(y[train], demod.take(train))
-    track = track_harmonics(y, demod, n_harmonics=n_h, block_periods=block_periods)
-    evidence = _evidence(y, demod, track, candidates, sample_rate_hz=sample_rate_hz)
     logger.info("free oscillation: cause %s, held-out gain %.3f", cause_name,
                 1.0 - current_err / base)
     return FreeOscillationDiagnosis(
@@ -282,6 +292,26 @@ def diagnose_free(y: ArrayLike, *, sample_rate_hz: float, heldout_fraction: floa
         ])
 
 
+def _excluded(candidate: dict[str, Any], evidence: dict[str, Any]) -> str:
+    """Why a candidate is physically excluded whatever its gain ("" if it is not).
+
+    A gap-modulated force is excluded when, for every power law tested, the force gradient
+    it needs reaches snap-in (``F'/k >= 1``) or the frequency drift it implies exceeds
+    ``_FREQUENCY_MARGIN`` times the measured drift of the block frequencies.
+    """
+    req = evidence.get("gap_force_requirement")
+    if candidate["model"] != "GapModulatedForce" or not req:
+        return ""
+    measured = max(evidence["block_frequency_range"], 1e-9)
+    needed = min(v["frequency_change_min"] for k, v in req.items() if k.startswith("m"))
+    if needed > _FREQUENCY_MARGIN * measured:
+        return (f"a gap-modulated force making this 2nd harmonic needs F'/k >= "
+                f"{min(v['gradient_min'] for k, v in req.items() if k.startswith('m')):.2f} "
+                f"and a frequency drift >= {needed:.2g} (relative) for the harmonics' drift; "
+                f"measured {measured:.2g}")
+    return ""
+
+
 def _evidence(y: NDArray[np.float64], demod: Demodulation, track: HarmonicTrack,
               candidates: list[dict[str, Any]], *, sample_rate_hz: float) -> dict[str, Any]:
     valid = demod.valid
@@ -294,8 +324,11 @@ def _evidence(y: NDArray[np.float64], demod: Demodulation, track: HarmonicTrack,
     gap = next((c for c in candidates if c["model"] == "GapModulatedForce"), None)
     extra: dict[str, Any] = {}
     if gap is not None and math.isfinite(drift):
+        # only a drift resolved at 3 standard errors counts
+        resolved = abs(scaling["h2"]["drift_per_s"]) > 3 * scaling["h2"]["drift_stderr"]
         extra["gap_force_requirement"] = gap_force_requirement(
-            gap["coef"][0], float(track.amplitude.mean()), harmonic_drift=drift)
+            gap["coef"][0], float(track.amplitude.mean()),
+            harmonic_drift=drift if resolved else 0.0)
     return {
         **extra,
         "harmonic_drift_over_record": {"h2": drift,

@@ -53,3 +53,6 @@ def test_whole_record() -> None:
     # a fixed-amplitude 2 omega drive would give exponent 0
     h2 = d.evidence["scaling"]["h2"]
     assert h2["exponent"] > 3 * h2["exponent_stderr"]
+    # a gap-modulated electrostatic force would need a frequency drift the record does not show
+    gap = next(c for c in d.candidates if c["model"] == "GapModulatedForce")
+    assert gap["excluded"]
