@@ -50,6 +50,7 @@ from afmlearn.freeosc.evidence import (
     gap_force_requirement,
     non_harmonic_peak,
     phase_lock,
+    quadrature_scaling,
     quantisation_step,
     scaling_with_drift,
 )
@@ -69,6 +70,8 @@ MIN_STEP_GAIN = 0.02
 #: a physically required frequency drift beyond this multiple of the measured one excludes a
 #: candidate (see `_excluded`)
 _FREQUENCY_MARGIN = 10.0
+#: an amplitude exponent this many standard errors from 0 rules out a fixed-amplitude drive
+_EXPONENT_SIGMAS = 4.0
 #: relative line amplitude above which a non-harmonic peak becomes a higher-mode candidate
 _MODE_LINE = 1e-3
 
@@ -83,8 +86,9 @@ class FreeOscillationDiagnosis:
     cause : str
         The named cause (``"none"`` when no cause reaches ``min_gain``).
     confidence : float
-        In [0, 1]: ``1 - gain_runner_up / gain_best`` over causes of a different name (0
-        when the two are indistinguishable on the held-out span).
+        In [0, 1]: ``1 - gain_runner_up / gain_best`` over the causes of a different name
+        that the evidence does not exclude (0 when the two are indistinguishable on the
+        held-out span).
     gain : float
         Held-out gain of the model with every cause found (``causes``), vs the baseline.
     baseline_nrmse, extended_nrmse : float
@@ -295,10 +299,15 @@ def diagnose_free(y: ArrayLike, *, sample_rate_hz: float, heldout_fraction: floa
 def _excluded(candidate: dict[str, Any], evidence: dict[str, Any]) -> str:
     """Why a candidate is physically excluded whatever its gain ("" if it is not).
 
-    A gap-modulated force is excluded when, for every power law tested, the force gradient
-    it needs reaches snap-in (``F'/k >= 1``) or the frequency drift it implies exceeds
-    ``_FREQUENCY_MARGIN`` times the measured drift of the block frequencies.
+    A fixed-amplitude 2 omega drive is excluded when both the in-phase and the quadrature
+    part of the 2nd harmonic scale with the amplitude (exponents resolved away from 0 at
+    ``_EXPONENT_SIGMAS`` standard errors). A gap-modulated force is excluded when, for every
+    power law tested, the force gradient it needs reaches snap-in (``F'/k >= 1``) or the
+    frequency drift it implies exceeds ``_FREQUENCY_MARGIN`` times the measured drift of the
+    block frequencies.
     """
+    if candidate["model"] == "AcBiasDrive":
+        return _not_a_fixed_drive(evidence)
     req = evidence.get("gap_force_requirement")
     if candidate["model"] != "GapModulatedForce" or not req:
         return ""
@@ -309,6 +318,16 @@ def _excluded(candidate: dict[str, Any], evidence: dict[str, Any]) -> str:
                 f"{min(v['gradient_min'] for k, v in req.items() if k.startswith('m')):.2f} "
                 f"and a frequency drift >= {needed:.2g} (relative) for the harmonics' drift; "
                 f"measured {measured:.2g}")
+    return ""
+
+
+def _not_a_fixed_drive(evidence: dict[str, Any]) -> str:
+    parts = (evidence["scaling"]["h2"], evidence["quadrature_scaling"]["h2"])
+    if all(abs(p["exponent"]) > _EXPONENT_SIGMAS * p["exponent_stderr"] for p in parts):
+        return ("a drive of fixed amplitude makes a 2nd harmonic independent of A; measured "
+                f"exponents {parts[0]['exponent']:.2f} +- {parts[0]['exponent_stderr']:.2f} "
+                f"(magnitude) and {parts[1]['exponent']:.2f} +- "
+                f"{parts[1]['exponent_stderr']:.2f} (quadrature part)")
     return ""
 
 
@@ -341,6 +360,7 @@ def _evidence(y: NDArray[np.float64], demod: Demodulation, track: HarmonicTrack,
         "harmonic_noise_floor": float(np.mean(track.harmonic_sigma / track.amplitude)),
         "amplitude_range": [float(track.amplitude.min()), float(track.amplitude.max())],
         "scaling": scaling,
+        "quadrature_scaling": {"h2": quadrature_scaling(track, 2)},
         "phase_lock": {f"h{n}": phase_lock(track, n) for n in (2, 3)},
         "dc_coupling": dc_coupling(track),
         "frequency_hz": {"median": float(np.median(freq)),

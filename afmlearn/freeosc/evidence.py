@@ -2,6 +2,7 @@
 
 - `scaling_with_drift`: ``ln |X_n| = c + p ln |X_1| + s t`` over blocks: the amplitude exponent
   p with a linear time trend (a slowly drifting coefficient) separated from it;
+- `quadrature_scaling`: the same for the part of ``R_n`` in quadrature with ``n phi``;
 - `phase_lock`: mean and spread of ``arg R_n`` and its distance from 0 / pi;
 - `dc_coupling`: slope of the block offset against ``Re R_2`` (detector map +1, a
   gap-modulated force on resonance -3);
@@ -22,7 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 from afmlearn.freeosc.track import HarmonicTrack
 
 __all__ = ["dc_coupling", "gap_force_requirement", "non_harmonic_peak", "phase_lock",
-           "quantisation_step", "scaling_with_drift"]
+           "quadrature_scaling", "quantisation_step", "scaling_with_drift"]
 
 
 def _ols(design: NDArray[np.float64], target: NDArray[np.float64]
@@ -36,7 +37,7 @@ def _ols(design: NDArray[np.float64], target: NDArray[np.float64]
 
 
 def scaling_with_drift(track: HarmonicTrack, harmonic: int) -> dict[str, float]:
-    """Amplitude exponent of harmonic n with a linear time trend.
+    """Amplitude exponent of harmonic n, ``|R_n|``, with a linear time trend.
 
     Returns
     -------
@@ -45,16 +46,31 @@ def scaling_with_drift(track: HarmonicTrack, harmonic: int) -> dict[str, float]:
         ``drift_stderr`` (relative change of ``|X_n|`` per second at fixed amplitude),
         ``log_amplitude_range``; NaN when fewer than 4 blocks.
     """
+    return _scaling(track, harmonic, np.abs(_harmonic(track, harmonic)))
+
+
+def quadrature_scaling(track: HarmonicTrack, harmonic: int) -> dict[str, float]:
+    """`scaling_with_drift` of the quadrature part ``|Im R_n|`` alone: the part an
+    instantaneous map cannot make. A fixed-amplitude drive gives exponent 0 for it too."""
+    return _scaling(track, harmonic, np.abs(_harmonic(track, harmonic).imag))
+
+
+def _harmonic(track: HarmonicTrack, harmonic: int) -> NDArray[np.complex128]:
     if not 2 <= harmonic <= track.harmonics.shape[1]:
         raise ValueError(f"harmonic must be in [2, {track.harmonics.shape[1]}], got {harmonic}")
+    return track.harmonics[:, harmonic - 1]
+
+
+def _scaling(track: HarmonicTrack, harmonic: int, values: NDArray[np.float64]
+             ) -> dict[str, float]:
     la = np.log(track.amplitude)
     out = {"exponent": math.nan, "exponent_stderr": math.nan, "drift_per_s": math.nan,
            "drift_stderr": math.nan, "log_amplitude_range": float(np.ptp(la)) if la.size else 0.0}
-    if la.size < 4:
+    if la.size < 4 or not np.all(values > 0):
         return out
     t = track.time_s - track.time_s.mean()
     design = np.column_stack([np.ones_like(la), la - la.mean(), t])
-    coef, se = _ols(design, np.log(np.abs(track.harmonics[:, harmonic - 1])))
+    coef, se = _ols(design, np.log(values))
     out.update(exponent=float(coef[1]), exponent_stderr=float(se[1]),
                drift_per_s=float(coef[2]), drift_stderr=float(se[2]))
     return out

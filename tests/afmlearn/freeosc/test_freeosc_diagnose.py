@@ -52,7 +52,7 @@ def test_electrostatic_second_harmonic_drive_is_named_and_detector_is_not() -> N
     assert "detector_nonlinearity" not in _names(d)
     assert d.gain > 0.3
     best = max(d.candidates, key=lambda c: c["gain"])
-    assert best["model"] == "AcBiasDrive"
+    assert best["model"] == "AcBiasDrive" and not best["excluded"]
     assert abs(d.evidence["scaling"]["h2"]["exponent"]) < 0.3  # fixed drive: A^0
 
 

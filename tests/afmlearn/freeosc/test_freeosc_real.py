@@ -56,3 +56,5 @@ def test_whole_record() -> None:
     # a gap-modulated electrostatic force would need a frequency drift the record does not show
     gap = next(c for c in d.candidates if c["model"] == "GapModulatedForce")
     assert gap["excluded"]
+    ac = next(c for c in d.candidates if c["model"] == "AcBiasDrive")
+    assert ac["excluded"]  # the 2nd harmonic scales with A: not a fixed-amplitude drive
