@@ -407,7 +407,11 @@ class ExponentProfile:
     ``a0`` is profiled (grid plus bounded refinement). The 95 % interval is where
     ``n_rows log(RSS / RSS_min) <= 3.841`` with RSS and ``n_rows`` of the block-mean rows
     (:func:`block_mean_rss`); when it reaches ``low`` or ``high`` the data do
-    not bound the exponent (``bounded`` False). With ``offsets`` the observations' gap
+    not bound the exponent (``bounded`` False). ``cv_interval``: the exponents whose rolling
+    cross-validation error (whole unseen set-points for three or more observations) is within
+    one paired standard error of the best exponent's - a companion that does not rely on the
+    rows' noise model (the profile likelihood does, and a law that cannot fit every orbit to
+    noise makes it too narrow). With ``offsets`` the observations' gap
     offsets are re-fitted at every exponent (they trade with it).
     """
 
@@ -419,7 +423,7 @@ class ExponentProfile:
     offsets: bool = True
 
     def _rss(self, problem: JointProblem, lib: AFMLibrary, j: int, p: float,
-             a0_hint: float) -> tuple[float, float]:
+             a0_hint: float) -> tuple[float, float, FloatArray]:
         lp = lib.replace(j, Indentation(float(p)))
         lo, hi = problem.a0_range
         grid = np.unique(np.concatenate([np.geomspace(lo, hi, self.n_a0), [a0_hint]]))
@@ -440,8 +444,10 @@ class ExponentProfile:
                 pr = pr2
         c, rss, des = support_fit(pr, lp, best_a)
         if not math.isfinite(rss):
-            return math.inf, best_a
-        return block_mean_rss(pr, des, c)[0], best_a
+            return math.inf, best_a, np.full(len(problem.blocks) - 1, np.inf)
+        cv = cv_errors(des.optimizer(), des.theta, des.y, pr.blocks,
+                       np.ones(des.theta.shape[1], bool), prior=pr.prior(des.theta.shape[1]))
+        return block_mean_rss(pr, des, c)[0], best_a, cv
 
     def run(self, problem: JointProblem, lib: AFMLibrary, a0: float, p0: float
             ) -> dict[str, Any] | None:
@@ -479,9 +485,26 @@ class ExponentProfile:
         k = int(np.nanargmin(prof[:, 1]))
         p_best = float(prof[k, 0])
         bounded = bool(lo_p > self.low + 1e-9 and hi_p < self.high - 1e-9)
+        # cross-validated companion: exponents whose rolling-CV error (unseen set-points when
+        # the folds are observations) is within one paired standard error of the best one's
+        ks = sorted(pts)
+        cvs = np.array([pts[k][2] for k in ks])
+        ok = np.all(np.isfinite(cvs), axis=1)
+        cv_iv: tuple[float, float] = (math.nan, math.nan)
+        if ok.any() and cvs.shape[1] >= 2:
+            ib = int(np.argmin(np.where(ok, cvs.mean(axis=1), np.inf)))
+            inside = []
+            for i, kk in enumerate(ks):
+                if not ok[i]:
+                    continue
+                d = cvs[i] - cvs[ib]
+                if float(d.mean()) <= float(d.std(ddof=1)) / math.sqrt(d.size):
+                    inside.append(kk)
+            cv_iv = (float(min(inside)), float(max(inside)))
         return {"profile": prof, "interval": (lo_p, hi_p), "bounded": bounded,
                 "best_exponent": p_best, "best_a0": pts[round(p_best, 6)][1],
-                "n_rows": n_rows, "term_index": j}
+                "n_rows": n_rows, "term_index": j, "cv_interval": cv_iv,
+                "cv_bounded": bool(cv_iv[0] > self.low + 1e-9 and cv_iv[1] < self.high - 1e-9)}
 
 
 # ---------------------------------------------------------------------------- pipeline

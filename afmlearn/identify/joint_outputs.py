@@ -115,6 +115,8 @@ def joint_summary(res: JointResult, model: IdentifiedModel, forces: dict[str, Fl
         "interaction_exponent_interval": interval,
         "interaction_exponent_bounded": None if ex is None else bool(ex["bounded"]),
         "interaction_exponent_profile_best": None if ex is None else ex["best_exponent"],
+        "interaction_exponent_cv_interval": None if ex is None else ex["cv_interval"],
+        "interaction_exponent_cv_bounded": None if ex is None else ex["cv_bounded"],
         "a0": model.a0, "a0_m": model.a0 * sc.length,
         "n_observations": pb.n_obs,
         "rest_gaps_m": [o.gap * pb.length_m for o in pb.observations],
@@ -146,4 +148,11 @@ def format_exponent(summary: dict[str, Any]) -> str:
         bounded = iv[0] > 0.5 + 1e-9 and iv[1] < 4.0 - 1e-9
     if not bounded:
         txt += ": NOT bounded by the data (the interval reaches the end of the profiled range)"
+    best = summary.get("interaction_exponent_profile_best")
+    if best is not None and not iv[0] <= p <= iv[1]:
+        txt += f"; the profile's best exponent is {best:.2f}, not the selected model's"
+    cv = summary.get("interaction_exponent_cv_interval")
+    if cv is not None and all(math.isfinite(v) for v in cv):
+        txt += (f"; cross-validated over set-points {cv[0]:.2f}-{cv[1]:.2f}"
+                + ("" if summary.get("interaction_exponent_cv_bounded") else " (NOT bounded)"))
     return txt
