@@ -5,7 +5,8 @@
     shaded; (b) ``|X_n| / |X_1|`` of harmonics 2 and 3 per block against the amplitude,
     with the slopes an ``A^n`` law (detector map, gap-modulated force) and a fixed-amplitude
     drive predict; (c) one period of the held-out record minus its fundamental, phase-averaged,
-    with the named model's prediction; (d) the held-out gain of every candidate cause.
+    with the named model's prediction; (d) the held-out gain of every candidate cause (hatched:
+    excluded by the evidence whatever its gain).
 """
 
 from __future__ import annotations
@@ -77,12 +78,17 @@ def plot_free_diagnosis(diagnosis: FreeOscillationDiagnosis, y: NDArray[np.float
     ax_w.legend(fontsize=7)
     ax_w.set_title("(c) held-out span, one period averaged", fontsize=9)
 
-    names = [f"{c['model']}\n({c['cause']})" for c in diagnosis.candidates]
+    names = [f"{c['model']}\n({c['cause']}{', excluded' if c.get('excluded') else ''})"
+             for c in diagnosis.candidates]
     gains = [c["gain"] for c in diagnosis.candidates]
-    ax_g.barh(range(len(gains)), gains, color=["C3" if c["cause"] == diagnosis.cause else "0.6"
-                                                for c in diagnosis.candidates])
+    colors = ["C3" if c["cause"] == diagnosis.cause and not c.get("excluded") else "0.6"
+              for c in diagnosis.candidates]
+    hatch = ["//" if c.get("excluded") else "" for c in diagnosis.candidates]
+    bars = ax_g.barh(range(len(gains)), gains, color=colors)
+    for bar, h in zip(bars, hatch, strict=True):
+        bar.set_hatch(h)
     ax_g.set_yticks(range(len(gains)), names, fontsize=6)
     ax_g.set_xlabel("held-out gain 1 - NRMSE / NRMSE(linear lever)")
-    ax_g.set_title("(d) causes, each fitted before the held-out span", fontsize=9)
+    ax_g.set_title("(d) held-out gain (hatched: excluded)", fontsize=9)
     fig.tight_layout()
     return _save(fig, _out_dir(out_dir) / name)
