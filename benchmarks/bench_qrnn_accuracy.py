@@ -323,6 +323,8 @@ def _group_metrics(tab: dict[str, Any], sel: Any, cal: Any, d: dict[str, Any],
     t = cal.threshold
     out = {"n": float(sel.sum()), "n_coupled": float(y.sum()), "auc": roc_auc(y, raw),
            "recall": float(np.mean(p[y] >= t)) if y.any() else float("nan"),
+           "recall_strong": (float(np.mean(p[tab["coupling"][sel] > 0.01] >= t))
+                             if (tab["coupling"][sel] > 0.01).any() else float("nan")),
            "false_flags": float(np.mean(p[~y] >= t)) if (~y).any() else float("nan"),
            "ece_raw": expected_calibration_error(raw, y),
            "ece": expected_calibration_error(p, y)}
@@ -365,7 +367,7 @@ def _diagnose_generator(checkpoint: Path, cal: Any, n_per_cause: int) -> dict[st
     from afmlearn.qrnn.evidence import coupling_probability
     from simulator.labels import coupling_strength
 
-    raw, prob, truth, cause = [], [], [], []
+    raw, prob, truth, cause, shares = [], [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for c in ("higher_mode", "none"):
             rng = np.random.default_rng(2026 if c == "none" else 2027)
@@ -380,7 +382,10 @@ def _diagnose_generator(checkpoint: Path, cal: Any, n_per_cause: int) -> dict[st
                 prob.append(ev.probability[0])
                 truth.append(share > 0.003)
                 cause.append(c)
+                shares.append(share)
     raw_a, p, y = np.array(raw), np.array(prob), np.array(truth)
+    if not y.any():       # none coupled by the label: score the cause instead
+        y = np.array(cause) == "higher_mode"
     t = cal.threshold
     nan = float("nan")
     m = {"n": float(y.size), "n_coupled": float(y.sum()), "auc": roc_auc(y, raw_a),
@@ -389,9 +394,12 @@ def _diagnose_generator(checkpoint: Path, cal: Any, n_per_cause: int) -> dict[st
          "ece_raw": nan, "ece": nan, "iou": nan, "iou_labelled": nan, "n_spots": 0.0,
          "nrmse1": nan, "nrmse_last": nan, "pers1": nan, "pers_last": nan}
     hm = np.array(cause) == "higher_mode"
-    print(f"diagnosis generator: {int(hm.sum())} higher_mode ({int(y[hm].sum())} coupled by "
-          f"the label), probabilities {np.round(p, 3).tolist()}", flush=True)
-    return {"other generator (diagnosis hidden effects, tip, 200 spp): higher_mode vs none": m}
+    n_lab = int(np.sum(np.array(truth)))
+    print(f"diagnosis generator: {int(hm.sum())} higher_mode draws, {n_lab} coupled by the "
+          f"label; shares {np.round(shares, 5).tolist()}; probabilities "
+          f"{np.round(p, 4).tolist()}", flush=True)
+    what = "coupled by the label" if n_lab else "cause higher_mode (none coupled by the label)"
+    return {f"other generator (diagnosis hidden effects, tip, 200 spp), {what}": m}
 
 
 def transfer(checkpoint: Path, *, write: bool, figures: Path, diagnose_cases: int = 0) -> str:
@@ -460,11 +468,13 @@ def transfer(checkpoint: Path, *, write: bool, figures: Path, diagnose_cases: in
         return "-" if v != v else f"{v:.{n}f}"
 
     rows = [[k, f"{int(m['n'])} ({int(m['n_coupled'])})", f(m["auc"]), f(m["recall"], 2),
+             f(m.get("recall_strong", float("nan")), 2),
              f(m["false_flags"], 3), f"{f(m['ece_raw'])} -> {f(m['ece'])}",
              f"{f(m['iou'], 2)} / {f(m['iou_labelled'], 2)} ({int(m['n_spots'])})",
              f"{f(m['nrmse1'], 4)} / {f(m['pers1'], 4)}",
              f"{f(m['nrmse_last'], 4)} / {f(m['pers_last'], 4)}"] for k, m in results.items()]
     table = md_table(["set: group", "traces (coupled)", "AUC", "recall at threshold",
+                      "recall, coupling > 0.01",
                       "false flags at threshold", "ECE raw -> calibrated",
                       "sweet-spot IoU all / with a spot (n spots)",
                       "NRMSE period 1: model / persistence",

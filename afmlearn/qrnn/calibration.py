@@ -44,7 +44,9 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-#: raw scores are clipped to [EPS, 1 - EPS] before the logit
+#: raw scores are clipped to [EPS, 1 - EPS] before the logit (float32 window scores of
+#: confidently uncoupled traces reach ~1e-30; clipping them ties them, so the false-flag
+#: threshold may be conservative, but keeps the probabilities representable)
 EPS = 1e-6
 
 
@@ -62,6 +64,11 @@ def _labels(values: ArrayLike, n: int) -> NDArray[np.bool_]:
     if not np.all(np.isin(y, (0, 1, False, True))):
         raise ValueError("labels must be 0/1 (or bool)")
     return y.astype(bool)
+
+
+def _sigmoid(z: FloatArray) -> FloatArray:
+    """Logistic function without overflow warnings."""
+    return np.exp(-np.logaddexp(0.0, -z))
 
 
 def _logit(p: FloatArray) -> FloatArray:
@@ -101,7 +108,8 @@ class AbstractCalibrator(abc.ABC):
 
 @final
 class PlattCalibrator(AbstractCalibrator):
-    """``p = sigmoid(a * logit(score) + b)``, fitted by Newton's method on the log-loss.
+    """``p = sigmoid(a * logit(score) + b)``, fitted by Newton's method with a backtracking
+    line search on the log-loss.
 
     Targets are Platt's smoothed ``(n_pos + 1) / (n_pos + 2)`` and ``1 / (n_neg + 2)``, which
     keeps ``a`` finite on separable data. ``a`` is constrained to be >= 0 (monotone).
@@ -119,22 +127,37 @@ class PlattCalibrator(AbstractCalibrator):
         x = _logit(scores)
         n_pos, n_neg = int(labels.sum()), int((~labels).sum())
         t = np.where(labels, (n_pos + 1.0) / (n_pos + 2.0), 1.0 / (n_neg + 2.0))
+
+        def loss(a: float, b: float) -> float:
+            z = a * x + b   # cross-entropy with soft targets, stable for any z
+            return float(np.sum(np.logaddexp(0.0, z) - t * z))
+
         a, b = 1.0, 0.0
+        f = loss(a, b)
         for _ in range(int(self.max_iter)):
-            p = 1.0 / (1.0 + np.exp(-(a * x + b)))
-            w = np.maximum(p * (1.0 - p), 1e-12)
+            p = _sigmoid(a * x + b)
+            w = p * (1.0 - p)
             g = np.array([np.sum((p - t) * x), np.sum(p - t)])
             h = np.array([[np.sum(w * x * x), np.sum(w * x)], [np.sum(w * x), np.sum(w)]])
-            h += 1e-9 * np.eye(2)
-            step = np.linalg.solve(h, g)
-            a, b = a - step[0], b - step[1]
-            if np.max(np.abs(step)) < 1e-10:
+            step = np.linalg.solve(h + 1e-10 * (1.0 + np.trace(h)) * np.eye(2), g)
+            lam = 1.0   # backtracking line search (Newton alone diverges once p saturates)
+            while lam > 1e-10:
+                a_new, b_new = a - lam * step[0], b - lam * step[1]
+                f_new = loss(a_new, b_new)
+                if f_new <= f - 1e-4 * lam * float(g @ step):
+                    break
+                lam *= 0.5
+            else:
+                break
+            converged = abs(f - f_new) <= 1e-12 * max(1.0, abs(f))
+            a, b, f = a_new, b_new, f_new
+            if converged:
                 break
         self.a_, self.b_ = max(float(a), 0.0), float(b)
 
     def predict(self, scores: ArrayLike) -> FloatArray:
         x = _logit(_scores("scores", scores))
-        return 1.0 / (1.0 + np.exp(-(self.a_ * x + self.b_)))
+        return _sigmoid(self.a_ * x + self.b_)
 
     def to_dict(self) -> dict[str, Any]:
         return {"kind": "platt", "a": self.a_, "b": self.b_}

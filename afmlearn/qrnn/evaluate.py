@@ -85,7 +85,7 @@ def valid_prediction_time(nrmse: NDArray[np.float64], *, threshold: float = 0.1
 
 def collect(module: Any, dataloader: Iterable[dict[str, torch.Tensor]]) -> dict[str, np.ndarray]:
     """Predictions and labels of every window of ``dataloader`` as numpy arrays."""
-    keys = ("y", "coupled", "sweet", "omega", "sweep_id", "point")
+    keys = ("y", "coupling", "coupled", "sweet", "omega", "sweep_id", "point")
     out: dict[str, list[np.ndarray]] = {k: [] for k in
                                         ("pred", "coupled_score", "sweet_score", "x0", *keys)}
     for batch in dataloader:
@@ -105,7 +105,8 @@ def trace_table(d: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     Returns
     -------
     dict
-        ``raw_score`` (mean window coupling score), ``coupled`` (bool), ``sweet_score``,
+        ``raw_score`` (mean window coupling score), ``coupled`` (bool), ``coupling`` (the
+        label's share of the motion in modes >= 2), ``sweet_score``,
         ``sweet`` (bool), ``omega``, ``sweep_id``, ``point`` -- shape (n_traces,) each.
     """
     key = d["sweep_id"].astype(np.int64) * 1_000_003 + d["point"].astype(np.int64)
@@ -115,6 +116,7 @@ def trace_table(d: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     _, sweet_label = trace_scores(d["sweet"].astype(float), key)
     first = np.unique(key, return_index=True)[1]
     return {"raw_score": score, "coupled": label > 0.5, "sweet_score": sweet_score,
+            "coupling": d["coupling"][first].astype(float),
             "sweet": sweet_label > 0.5, "omega": d["omega"][first].astype(float),
             "sweep_id": d["sweep_id"][first], "point": d["point"][first]}
 
