@@ -29,6 +29,7 @@ __all__ = ["plot_curve_fit", "plot_curve_force", "plot_curve_dissipation", "curv
 
 def _save(fig: Figure, path: Path) -> Path:
     FigureCanvasAgg(fig)
+    path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)
     return path
