@@ -53,6 +53,7 @@ from .fit import (
     Build,
     fit_baseline,
     fit_extension,
+    refine_balance,
     refine_output_error,
     structure,
 )
@@ -203,28 +204,32 @@ class _Fit:
 class _Probe:
     """:class:`~afmlearn.diagnose.hypotheses.base.Probe` of one fitted extension."""
 
-    def __init__(self, traces: Sequence[Any], oe: OutputError, fit: _Fit, nfev: int) -> None:
+    def __init__(self, traces: Sequence[Any], jb: JointBalance, oe: OutputError, fit: _Fit,
+                 nfev: int) -> None:
         self.traces = traces
+        self._jb = jb
         self._oe = oe
         self._fit = fit
         self._nfev = nfev
 
     def profile(self, name: str, values: Sequence[float]) -> FloatArray:
-        """Output-error chi-square with parameter ``name`` held at each of ``values`` (in the
-        order given, each refit warm-started from the previous one)."""
+        """Output-error chi-square with parameter ``name`` held at each of ``values``: the
+        other parameters are first refitted on the harmonic balance at that value (a cheap,
+        converged start: ``a0`` and the stiffness move along the valley), then by output
+        error."""
         params = self._fit.params
         k = [p.name for p in params].index(name)
         rest = [p for j, p in enumerate(params) if j != k]
-        sol = self._fit.sol
-        start = dataclasses.replace(sol, values=tuple(v for j, v in enumerate(sol.values)
-                                                      if j != k))
+        hb = self._fit.hb
+        hb_start = [v for j, v in enumerate(hb.values) if j != k]
         out = []
         for value in values:
             def build(v: Sequence[float], value: float = float(value)) -> Any:
                 return self._fit.build([*v[:k], value, *v[k:]])
-            refit, _ = self._oe.refine(start, build, rest, max_nfev=self._nfev)
+            sol = refine_balance(self._jb, build, rest, hb_start, hb.phases, None, 30)
+            sol = dataclasses.replace(sol, phases=self._fit.sol.phases)
+            refit, _ = self._oe.refine(sol, build, rest, max_nfev=self._nfev)
             out.append(refit.chi2)
-            start = refit
         return np.asarray(out, float)
 
 
@@ -587,7 +592,8 @@ class Diagnoser:
             starts = fit_extension(jb, current.hb, h, ctx)
             sol, _, build, params = refine_output_error(oe, starts, h, current.sol, ctx)
         else:   # joint fits cost n_obs orbits per evaluation: one start, fewer iterations
-            starts = fit_extension(jb, current.hb, h, ctx, n_starts=min(h.n_starts, 2))
+            starts = fit_extension(jb, current.hb, h, ctx, n_starts=min(h.n_starts, 2),
+                                   max_nfev=60)
             if current.hb.chi2 - starts[0].chi2 < self.screen_chi2:
                 # no equation-error evidence at all: the output error is not run (measured on
                 # series: the equation-error drop is at least the output-error drop except
@@ -611,7 +617,7 @@ class Diagnoser:
         model = oe.model(rep, sol.spec, sol.coef, sol.phases[rep])
         before = oe.model(rep, current.sol.spec, current.sol.coef, current.sol.phases[rep])
         if h.cause not in tested:
-            tested[h.cause] = h.details(model, _Probe(traces, oe, fit, 6))
+            tested[h.cause] = h.details(model, _Probe(traces, jb, oe, fit, 8))
         energy = np.array([self._energy(before), self._energy(model)])
         cand = Candidate(cause=h.cause, model=model, chi2=float(sol.chi2), delta_chi2=d,
                          threshold=thr, heldout_nrmse=math.nan, gain=math.nan,
