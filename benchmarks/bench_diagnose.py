@@ -290,10 +290,12 @@ def series_section(records: list[dict], variants: list[tuple[int, bool]]) -> str
            f"150-450, free amplitude 12-40 nm, 8 set-points spread from 0.80-0.92 down to "
            f"0.30-0.45 of it, a random drive phase per row, effect strengths as in the module), "
            f"{records[0]['periods'] if records else 0:g} periods per set-point. Each draw is "
-           f"simulated once and diagnosed in every variant: its 8 set-points, every other one "
-           f"(4), the deepest one alone (1 orbit), each with the recorded drive phase and with "
-           f"it removed. The diagnosis never sees the labels or the file name; thresholds: "
-           f"the shipped null calibration."] if records else ["No records yet."]
+           f"simulated once and diagnosed in every variant (same draws in every column): "
+           f"8 pts = its 8 set-points, 4 pts = every other one, 1 pt = the deepest one alone "
+           f"(one orbit, last 30 % of its periods held out); `phase` = the recorded drive "
+           f"phase given, `no phase` = removed from the file. The diagnosis never sees the "
+           f"labels or the file name; thresholds: the shipped null calibration."
+           ] if records else ["No records yet."]
     settings = sorted({(r["spp"], r["noise"]) for r in records}, reverse=True)
     vname = {v: f"{v[0]} pt{'s' if v[0] > 1 else ''}, {'phase' if v[1] else 'no phase'}"
              for v in variants}
@@ -327,6 +329,21 @@ def series_section(records: list[dict], variants: list[tuple[int, bool]]) -> str
                     txt += f" ({fmt(float(np.median(gains)), 2)})"
                 cells.append(txt)
             rows.append(cells)
+        eff = [k for k in complete if k[0] != "none"]
+        if eff:
+            first, extra = ["effects: first cause right", str(len(eff))], \
+                ["effects: causes named that are not there", str(len(eff))]
+            for v in variants:
+                hit = n_extra = 0
+                for k in eff:
+                    r = complete[k][v]
+                    truth = set(k[0].split("+"))
+                    found = [x["cause"] for x in r["causes_found"]]
+                    hit += r["cause_found"] in truth
+                    n_extra += len(set(found) - truth)
+                first.append(f"{100 * hit / len(eff):.0f} %")
+                extra.append(f"{n_extra}")
+            rows += [first, extra]
         for v in variants:
             t = np.array([complete[k][v]["t_diag"] for k in complete])
             null = [complete[k][v] for k in complete if k[0] == "none"]
@@ -371,8 +388,20 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
     jobs = series_jobs(settings, args.per_cause, args.pairs, args.periods, args.seed,
                        rec_dir / "series_files", variants,
                        causes=args.causes.split(",") if args.causes else None)
-    recs = run_series_jobs(jobs, rec_dir / "series.jsonl", args.workers)
+    if args.report_only:            # the section from the records so far (a run in progress)
+        path = rec_dir / "series.jsonl"
+        have = {}
+        if path.exists():
+            for line in path.read_text().splitlines():
+                if line.strip():
+                    r = json.loads(line)
+                    have[_series_key(r)] = r
+        recs = [have[_series_key(j)] for j in jobs if _series_key(j) in have]
+    else:
+        recs = run_series_jobs(jobs, rec_dir / "series.jsonl", args.workers)
     body = series_section(recs, variants)
+    if args.note:
+        body += "\n\n" + args.note
     write_section("diagnose_series", "Diagnosis on set-point series: one orbit vs 4 vs 8 "
                   "set-points, with and without the drive phase (`bench_diagnose.py --series`)",
                   body, info, write=not args.no_doc)
@@ -398,6 +427,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="set-point series: 1 vs 4 vs 8 set-points, with/without drive phase")
     ap.add_argument("--pairs", type=int, default=2,
                     help="series: draws per pair of effects (two effects at once)")
+    ap.add_argument("--note", default="", help="series: a closing paragraph for the section")
+    ap.add_argument("--report-only", action="store_true",
+                    help="series: write the section from the records so far, run nothing")
     ap.add_argument("--causes", default="",
                     help="series: comma-separated single causes to draw (default: all)")
     ap.add_argument("--variants", default="1:phase,4:phase,8:phase,1:none,4:none,8:none",
