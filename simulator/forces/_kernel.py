@@ -7,6 +7,10 @@ against its NumPy reference.
 
 Powers of the indentation are extended oddly (``sign(d) |d|**p``) so that the integrator's
 Runge--Kutta stages may step a little past the switching surface without producing NaN.
+
+numba's on-disk cache keys a function on its own file only: after editing this file, delete
+the ``*.nbi``/``*.nbc`` files of ``simulator/integrate``, ``afmlearn/identify`` and
+``afmlearn/diagnose`` (their kernels embed this code), or they keep running the old version.
 """
 
 from __future__ import annotations
