@@ -319,13 +319,13 @@ def _group_metrics(tab: dict[str, Any], sel: Any, cal: Any, d: dict[str, Any],
     from afmlearn.qrnn.evaluate import nrmse_per_period
 
     raw, y = tab["raw_score"][sel], tab["coupled"][sel]
-    p = cal.probability(raw)
-    t = cal.threshold
+    p, flag = cal(tab)              # per-trace probability and flag (each kind's calibration)
+    p, flag = p[sel], flag[sel]
+    strong = tab["coupling"][sel] > 0.01
     out = {"n": float(sel.sum()), "n_coupled": float(y.sum()), "auc": roc_auc(y, raw),
-           "recall": float(np.mean(p[y] >= t)) if y.any() else float("nan"),
-           "recall_strong": (float(np.mean(p[tab["coupling"][sel] > 0.01] >= t))
-                             if (tab["coupling"][sel] > 0.01).any() else float("nan")),
-           "false_flags": float(np.mean(p[~y] >= t)) if (~y).any() else float("nan"),
+           "recall": float(np.mean(flag[y])) if y.any() else float("nan"),
+           "recall_strong": float(np.mean(flag[strong])) if strong.any() else float("nan"),
+           "false_flags": float(np.mean(flag[~y])) if (~y).any() else float("nan"),
            "ece_raw": expected_calibration_error(raw, y),
            "ece": expected_calibration_error(p, y)}
     ious, ious_l = [], []
@@ -352,7 +352,7 @@ def _group_metrics(tab: dict[str, Any], sel: Any, cal: Any, d: dict[str, Any],
     return out
 
 
-def _diagnose_generator(checkpoint: Path, cal: Any, n_per_cause: int) -> dict[str, Any]:
+def _diagnose_generator(checkpoint: Path, n_per_cause: int) -> dict[str, Any]:
     """Another generator: the diagnosis' hidden-effect traces (SI VdW-DMT with Hamaker constant
     and tip radius, tip excitation, 200 samples per period, 1 % noise, 3 Q settling), cause
     ``higher_mode`` (mode-2 ratio 5.85-6.3) vs ``none``; truth = coupling share of the modal
@@ -367,7 +367,7 @@ def _diagnose_generator(checkpoint: Path, cal: Any, n_per_cause: int) -> dict[st
     from afmlearn.qrnn.evidence import coupling_probability
     from simulator.labels import coupling_strength
 
-    raw, prob, truth, cause, shares = [], [], [], [], []
+    raw, prob, truth, cause, shares, flags = [], [], [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for c in ("higher_mode", "none"):
             rng = np.random.default_rng(2026 if c == "none" else 2027)
@@ -380,17 +380,18 @@ def _diagnose_generator(checkpoint: Path, cal: Any, n_per_cause: int) -> dict[st
                 share = coupling_strength(modal) if modal.shape[0] > 1 else 0.0
                 raw.append(ev.raw_score[0])
                 prob.append(ev.probability[0])
+                flags.append(bool(ev.flag[0]))
                 truth.append(share > 0.003)
                 cause.append(c)
                 shares.append(share)
     raw_a, p, y = np.array(raw), np.array(prob), np.array(truth)
     if not y.any():       # none coupled by the label: score the cause instead
         y = np.array(cause) == "higher_mode"
-    t = cal.threshold
+    fl = np.array(flags)
     nan = float("nan")
     m = {"n": float(y.size), "n_coupled": float(y.sum()), "auc": roc_auc(y, raw_a),
-         "recall": float(np.mean(p[y] >= t)) if y.any() else nan,
-         "false_flags": float(np.mean(p[~y] >= t)) if (~y).any() else nan,
+         "recall": float(np.mean(fl[y])) if y.any() else nan,
+         "false_flags": float(np.mean(fl[~y])) if (~y).any() else nan,
          "ece_raw": nan, "ece": nan, "iou": nan, "iou_labelled": nan, "n_spots": 0.0,
          "nrmse1": nan, "nrmse_last": nan, "pers1": nan, "pers_last": nan}
     hm = np.array(cause) == "higher_mode"
@@ -418,6 +419,16 @@ def transfer(checkpoint: Path, *, write: bool, figures: Path, diagnose_cases: in
     cal = calibration_of(run)
     if cal is None:
         raise SystemExit(f"{checkpoint} carries no calibration")
+    by_kind = {k: calibration_of(run, k) for k in ("steady", "sweep")}
+
+    def calibrated(tab: dict[str, Any]) -> tuple[Any, Any]:
+        p = np.empty(tab["raw_score"].shape)
+        flag = np.empty(p.shape, bool)
+        for kind, sel in (("steady", tab["steady"]), ("sweep", ~tab["steady"])):
+            if sel.any():
+                p[sel] = by_kind[kind].probability(tab["raw_score"][sel])
+                flag[sel] = p[sel] >= by_kind[kind].threshold
+        return p, flag
     horizon = int(run["horizon"])
     data_cfg = run["config"]["data"]
     results: dict[str, dict[str, float]] = {}
@@ -454,15 +465,15 @@ def transfer(checkpoint: Path, *, write: bool, figures: Path, diagnose_cases: in
             if not sel.any():
                 continue
             wsel = np.isin(wkey, tkey[sel])
-            results[f"{name}: {g}"] = _group_metrics(tab, sel, cal, d, wsel, horizon)
-        p = cal.probability(tab["raw_score"])
+            results[f"{name}: {g}"] = _group_metrics(tab, sel, calibrated, d, wsel, horizon)
+        p = calibrated(tab)[0]
         curves[f"{name.split(' ')[0]}, calibrated"] = reliability_curve(p, tab["coupled"])
         if cfg_name is not None:
             curves[f"{name.split(' ')[0]}, raw score"] = reliability_curve(tab["raw_score"],
                                                                           tab["coupled"])
     if diagnose_cases:
-        results.update(_diagnose_generator(checkpoint, cal, diagnose_cases))
-    fig = plot_reliability(curves, figures / "qrnn_reliability.png", threshold=cal.threshold)
+        results.update(_diagnose_generator(checkpoint, diagnose_cases))
+    fig = plot_reliability(curves, figures / "qrnn_reliability.png")
 
     def f(v: float, n: int = 3) -> str:
         return "-" if v != v else f"{v:.{n}f}"
@@ -487,9 +498,11 @@ Checkpoint `{checkpoint.relative_to(ROOT) if checkpoint.is_relative_to(ROOT) els
 (recipe `python scripts/train_qrnn.py experiment=qrnn_default`). A trace = one sweep point or one
 set-point (its score: mean of its window scores). Calibration ({type(cal.calibrator).__name__})
 fitted on the validation cantilevers ({src.get('n_traces')} traces, {src.get('n_coupled')}
-coupled); flag threshold {cal.threshold:.3g} chosen there for a false-flag rate of
+coupled); flag thresholds chosen there for a false-flag rate of {cal.false_flag_rate:.0%} per
+record kind: steady records / set-points {by_kind['steady'].threshold:.3g}, sweep points
+{by_kind['sweep'].threshold:.3g} (all traces together: {cal.threshold:.3g}, a false-flag rate of
 {cal.false_flag_rate:.0%} (measured there: {src.get('calibration_false_flag_rate', nan):.3f},
-recall {src.get('calibration_recall', nan):.3f}).
+recall {src.get('calibration_recall', nan):.3f}). Each trace is scored with its kind's.
 
 In-distribution test = held-out cantilevers of the training families (conf/data/qrnn.yaml).
 Out-of-distribution = conf/data/qrnn_ood.yaml: a cantilever family never trained on

@@ -12,6 +12,7 @@ cantilevers never appear in training. Batches are dicts of tensors::
     omega    (B,) float32        f_drive / f0
     sweep_id (B,) int64          sweep direction the window comes from (dataset-wide id)
     point    (B,) int64          index of the point in its sweep (sweep order)
+    steady   (B,) float32        1 for a set-point of a set-point series, 0 for a sweep point
 
 (``P = samples_per_period``; the representation and the label definitions are documented in
 :mod:`afmlearn.qrnn.datagen`.) :func:`windows_from_trace` turns a recorded trace-format-v1 file
@@ -35,6 +36,7 @@ from torch.utils.data import BatchSampler, DataLoader, Dataset, RandomSampler, S
 
 from afmlearn.io import Trace, read_trace
 from afmlearn.qrnn.datagen import (
+    DIRECTIONS,
     N_FEATURES,
     DatasetSpec,
     generate_dataset,
@@ -175,6 +177,9 @@ class SweepDataModule(L.LightningDataModule):
                 "omega": win["omega"][sel].astype(np.float32),
                 "sweep_id": win["sweep_id"][sel].astype(np.int64),
                 "point": win["point_index"][sel].astype(np.int64),
+                # 1 for a set-point of a series (a steady record), 0 for a sweep point
+                "steady": (swp["direction"][win["sweep_id"][sel]]
+                           == DIRECTIONS.index("series")).astype(np.float32),
             }
             self._sets[name] = _Windows({k: torch.from_numpy(np.ascontiguousarray(v))
                                          for k, v in arrays.items()})
@@ -252,7 +257,7 @@ class SweepDataModule(L.LightningDataModule):
 
 def _sweep_records(pts: dict[str, NDArray], swp: dict[str, NDArray], ids: NDArray
                    ) -> list[dict[str, Any]]:
-    from afmlearn.qrnn.datagen import DIRECTIONS, FAMILIES
+    from afmlearn.qrnn.datagen import FAMILIES
 
     out = []
     for s in np.flatnonzero(np.isin(swp["cantilever_id"], ids)):

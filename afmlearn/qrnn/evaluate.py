@@ -85,10 +85,12 @@ def valid_prediction_time(nrmse: NDArray[np.float64], *, threshold: float = 0.1
 
 def collect(module: Any, dataloader: Iterable[dict[str, torch.Tensor]]) -> dict[str, np.ndarray]:
     """Predictions and labels of every window of ``dataloader`` as numpy arrays."""
-    keys = ("y", "coupling", "coupled", "sweet", "omega", "sweep_id", "point")
+    keys = ("y", "coupling", "coupled", "sweet", "omega", "sweep_id", "point", "steady")
     out: dict[str, list[np.ndarray]] = {k: [] for k in
                                         ("pred", "coupled_score", "sweet_score", "x0", *keys)}
     for batch in dataloader:
+        if "steady" not in batch:
+            batch = {**batch, "steady": torch.zeros_like(batch["omega"])}
         r = module.predict_windows(batch["x"])
         out["pred"].append(r["y"].numpy())
         out["coupled_score"].append(r["coupled"].numpy())
@@ -106,7 +108,8 @@ def trace_table(d: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     -------
     dict
         ``raw_score`` (mean window coupling score), ``coupled`` (bool), ``coupling`` (the
-        label's share of the motion in modes >= 2), ``sweet_score``,
+        label's share of the motion in modes >= 2), ``steady`` (bool: a set-point, not a sweep
+        point), ``sweet_score``,
         ``sweet`` (bool), ``omega``, ``sweep_id``, ``point`` -- shape (n_traces,) each.
     """
     key = d["sweep_id"].astype(np.int64) * 1_000_003 + d["point"].astype(np.int64)
@@ -117,6 +120,7 @@ def trace_table(d: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     first = np.unique(key, return_index=True)[1]
     return {"raw_score": score, "coupled": label > 0.5, "sweet_score": sweet_score,
             "coupling": d["coupling"][first].astype(float),
+            "steady": d["steady"][first] > 0.5,
             "sweet": sweet_label > 0.5, "omega": d["omega"][first].astype(float),
             "sweep_id": d["sweep_id"][first], "point": d["point"][first]}
 

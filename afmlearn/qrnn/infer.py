@@ -96,6 +96,8 @@ def load_module(checkpoint: str | os.PathLike[str] | None = None
         run["metrics"] = meta["metrics"]
     if meta.get("calibration"):
         run["calibration"] = meta["calibration"]
+    if meta.get("calibration_by_kind"):
+        run["calibration_by_kind"] = meta["calibration_by_kind"]
     model_cfg = run["config"]["model"]
     net = instantiate(model_cfg["net"], input_size=int(run["input_size"]))
     module = instantiate({k: v for k, v in model_cfg.items() if k not in _NOT_FOR_INFERENCE},
@@ -112,9 +114,16 @@ def _direction_name(omega: np.ndarray) -> str:
     return "forward" if omega[-1] > omega[0] else "reverse"
 
 
-def calibration_of(run: dict[str, Any]) -> CouplingCalibration | None:
-    """The checkpoint's coupling calibration (None for an uncalibrated checkpoint)."""
-    data = run.get("calibration")
+def calibration_of(run: dict[str, Any], kind: str | None = None
+                   ) -> CouplingCalibration | None:
+    """The checkpoint's coupling calibration (None for an uncalibrated checkpoint).
+
+    ``kind`` = ``"steady"`` (single records, set-points) or ``"sweep"`` (sweep points) picks
+    that kind's own calibration and threshold when the checkpoint has one; None (or a kind
+    without one) gives the calibration fitted on all traces.
+    """
+    data = (run.get("calibration_by_kind") or {}).get(kind) if kind else None
+    data = data or run.get("calibration")
     return CouplingCalibration.from_dict(data) if data else None
 
 
@@ -131,7 +140,8 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
         From :func:`load_module`.
     threshold : float, optional
         Flag threshold in (0, 1) on the trace score. Default: the checkpoint's calibrated
-        threshold (chosen for its stated false-flag rate), or 0.5 for an uncalibrated one.
+        threshold (chosen for its stated false-flag rate; the one of the record kind --
+        sweep points or steady records -- when the checkpoint has one), or 0.5 uncalibrated.
 
     Returns
     -------
@@ -142,13 +152,13 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
         probability of coupling when the checkpoint is calibrated (``raw_score``: the mean
         window score); the sweet-spot interval uses the raw sweet score at 0.5.
     """
-    cal = calibration_of(run)
+    if not isinstance(trace, Trace):
+        trace = read_trace(trace)          # labels=False: /labels is never opened
+    cal = calibration_of(run, "sweep" if trace.is_sweep else "steady")
     if threshold is None:
         threshold = cal.threshold if cal is not None else 0.5
     elif not 0.0 < float(threshold) < 1.0:
         raise ValueError(f"threshold must be in (0, 1), got {threshold!r}")
-    if not isinstance(trace, Trace):
-        trace = read_trace(trace)          # labels=False: /labels is never opened
     if trace.deflection_m is None:
         raise ValueError("deflection_m: the trace holds lock-in curves (amplitude/phase) only; "
                          "the QRNN needs the deflection record")

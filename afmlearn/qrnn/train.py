@@ -106,13 +106,15 @@ def _atomic_write_text(path: Path, text: str) -> None:
 
 def export_checkpoint(module: OrbitModule, path: str | os.PathLike[str], *,
                       metrics: dict[str, float] | None = None,
-                      calibration: CouplingCalibration | None = None) -> Path:
+                      calibration: CouplingCalibration
+                      | dict[str, CouplingCalibration] | None = None) -> Path:
     """Write a slim checkpoint: ``state_dict`` (float32) + afmlearn metadata, no optimiser.
 
     The file loads with ``torch.load(..., weights_only=True)`` and with
     :func:`afmlearn.qrnn.infer.load_module`. ``calibration`` (the coupling calibration and
-    flag threshold) is stored as plain types under the metadata key ``calibration``. Written
-    atomically; returns the path.
+    flag threshold, or a dict of them by record kind: ``"all"``, ``"steady"``, ``"sweep"``) is
+    stored as plain types under the metadata keys ``calibration`` (all) and
+    ``calibration_by_kind``. Written atomically; returns the path.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -122,8 +124,12 @@ def export_checkpoint(module: OrbitModule, path: str | os.PathLike[str], *,
     }
     module.on_save_checkpoint(checkpoint)
     checkpoint[CHECKPOINT_KEY]["metrics"] = dict(metrics or {})
-    if calibration is not None:
-        checkpoint[CHECKPOINT_KEY]["calibration"] = calibration.to_dict()
+    if isinstance(calibration, CouplingCalibration):
+        calibration = {"all": calibration}
+    if calibration:
+        checkpoint[CHECKPOINT_KEY]["calibration"] = calibration["all"].to_dict()
+        checkpoint[CHECKPOINT_KEY]["calibration_by_kind"] = {
+            k: c.to_dict() for k, c in calibration.items() if k != "all"}
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
     try:
         torch.save(checkpoint, tmp)
@@ -135,9 +141,14 @@ def export_checkpoint(module: OrbitModule, path: str | os.PathLike[str], *,
 
 
 def calibrate(module: OrbitModule, datamodule: Any, cfg: Any
-              ) -> tuple[CouplingCalibration, dict[str, float]]:
+              ) -> tuple[dict[str, CouplingCalibration], dict[str, float]]:
     """Fit the coupling calibration on the validation cantilevers (never trained on) and
     measure it on the test cantilevers.
+
+    One calibration (and threshold) for all traces (``"all"``) and, where the validation set
+    holds both classes of them, one per record kind: ``"steady"`` (set-points, single steady
+    records) and ``"sweep"`` (sweep points); inference uses the kind's own when present, so the
+    stated false-flag rate holds per kind.
 
     Parameters
     ----------
@@ -150,29 +161,45 @@ def calibrate(module: OrbitModule, datamodule: Any, cfg: Any
 
     Returns
     -------
-    calibration : CouplingCalibration
+    calibrations : dict of CouplingCalibration
+        ``"all"`` and, when fitted, ``"steady"`` and ``"sweep"``.
     metrics : dict
-        ``calibration/threshold``, ``calibration/false_flag_rate`` (stated),
+        ``calibration/threshold[_kind]``, ``calibration/false_flag_rate`` (stated),
         ``calibration/val_*`` (on the calibration set) and ``heldout/calibrated_recall``,
-        ``heldout/calibrated_false_flags``, ``heldout/calibrated_ece`` (test cantilevers).
+        ``heldout/calibrated_false_flags``, ``heldout/calibrated_ece`` (test cantilevers, each
+        trace with the calibration of its kind).
     """
     val = trace_table(collect(module, datamodule.val_dataloader()))
-    cal = CouplingCalibration.fit(val["raw_score"], val["coupled"],
-                                  calibrator=instantiate(cfg.calibrator),
-                                  false_flag_rate=float(cfg.false_flag_rate),
-                                  source={"split": "val (held-out cantilevers)"})
     test = trace_table(collect(module, datamodule.test_dataloader()))
-    p = cal.probability(test["raw_score"])
+    rate = float(cfg.false_flag_rate)
+    cals: dict[str, CouplingCalibration] = {}
+    for kind, sel in (("all", np.ones(val["steady"].shape, bool)), ("steady", val["steady"]),
+                      ("sweep", ~val["steady"])):
+        y = val["coupled"][sel]
+        if kind != "all" and (y.sum() < 3 or (~y).sum() < 20):
+            continue       # too few traces of a class for a calibration of its own
+        cals[kind] = CouplingCalibration.fit(val["raw_score"][sel], y,
+                                             calibrator=instantiate(cfg.calibrator),
+                                             false_flag_rate=rate,
+                                             source={"split": "val (held-out cantilevers)",
+                                                     "kind": kind})
+    p = np.empty(test["raw_score"].shape)
+    flag = np.empty(p.shape, bool)
+    for steady in (True, False):
+        sel = test["steady"] == steady
+        cal = cals.get("steady" if steady else "sweep", cals["all"])
+        p[sel] = cal.probability(test["raw_score"][sel]) if sel.any() else p[sel]
+        flag[sel] = p[sel] >= cal.threshold
     y = test["coupled"]
-    out = {"calibration/threshold": cal.threshold,
-           "calibration/false_flag_rate": cal.false_flag_rate,
-           **{f"calibration/val_{k}": float(v) for k, v in cal.source.items()
+    out = {"calibration/false_flag_rate": rate,
+           **{"calibration/threshold" + ("" if k == "all" else f"_{k}"): c.threshold
+              for k, c in cals.items()},
+           **{f"calibration/val_{k}": float(v) for k, v in cals["all"].source.items()
               if isinstance(v, int | float)},
-           "heldout/calibrated_recall": float(np.mean(p[y] >= cal.threshold)) if y.any()
-           else float("nan"),
-           "heldout/calibrated_false_flags": float(np.mean(p[~y] >= cal.threshold)),
+           "heldout/calibrated_recall": float(np.mean(flag[y])) if y.any() else float("nan"),
+           "heldout/calibrated_false_flags": float(np.mean(flag[~y])),
            "heldout/calibrated_ece": expected_calibration_error(p, y)}
-    return cal, out
+    return cals, out
 
 
 def _floats(metrics: dict[str, Any]) -> dict[str, float]:

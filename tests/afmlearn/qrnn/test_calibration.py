@@ -120,3 +120,29 @@ def test_calibrated_checkpoint_loads_and_sets_the_flag(tiny_run, tmp_path):
     np.testing.assert_allclose(ev.gap_m, [12e-9, 9e-9, 6e-9])
     assert ev.calibrated and ev.false_flag_rate == pytest.approx(0.1)
     assert ev.max_probability == pytest.approx(ev.probability.max())
+
+
+def test_per_kind_calibration_sets_the_threshold_of_the_record_kind(tiny_run, tmp_path):
+    """A checkpoint with calibrations by kind: set-points use the `steady` one, sweeps `all`'s
+    fallback unless a `sweep` one exists."""
+    module, _, _ = load_module(tiny_run["checkpoint"])
+    s, y, _ = _draw(600, a=1.0, b=0.0, seed=5)
+    cal_all = CouplingCalibration.fit(s, y, false_flag_rate=0.05)
+    cal_steady = CouplingCalibration.fit(s, y, false_flag_rate=0.2)
+    path = export_checkpoint(module, tmp_path / "kinds.ckpt",
+                             calibration={"all": cal_all, "steady": cal_steady})
+    _, run, _ = load_module(path)
+    f0, fs = 300e3, 64 * 300e3
+    t = np.arange(64 * 8) / fs
+    x = 10e-9 * np.cos(2 * np.pi * f0 * t)
+    meta = dict(sample_rate_hz=fs, spring_constant_n_per_m=40.0, quality_factor=400.0,
+                resonance_frequency_hz=f0)
+    series = Trace(np.array([x, x]), drive_frequency_hz=f0, gap_m=np.array([12e-9, 8e-9]),
+                   **meta)
+    sweep = Trace(np.array([x, x]), drive_frequency_hz=np.array([f0, 1.01 * f0]),
+                  gap_m=12e-9, **meta)
+    assert predict_trace(series, module, run)["summary"]["threshold"] == pytest.approx(
+        cal_steady.threshold)
+    assert predict_trace(sweep, module, run)["summary"]["threshold"] == pytest.approx(
+        cal_all.threshold)
+    assert cal_steady.threshold < cal_all.threshold   # a higher rate, a lower threshold
