@@ -53,7 +53,7 @@ def binned(d: NDArray, *values: NDArray, n_bins: int | None) -> tuple[NDArray, .
     amplitude noise moves them), so they are put on a uniform grid first, as one does with
     measured curves. Empty bins are dropped; ``None`` leaves the data as they are.
     """
-    if n_bins is None or d.size <= n_bins:
+    if n_bins is None:
         return (d, *values)
     edges = np.linspace(d[0], d[-1], n_bins + 1)
     idx = np.clip(np.searchsorted(edges, d, side="right") - 1, 0, n_bins - 1)
