@@ -222,7 +222,13 @@ def _series_job(job: dict) -> dict:
                          kind=exp.kind)
     exp = exp.subset(SUBSETS[job["n_points"]])
     t1 = time.perf_counter()
-    d = Diagnoser().fit(exp if len(exp) > 1 else exp[0])
+    try:
+        d = Diagnoser().fit(exp if len(exp) > 1 else exp[0])
+    except Exception as err:  # noqa: BLE001 -- a failed diagnosis is a result to report
+        return {**job, "case": case, "t_sim": t_sim, "t_diag": time.perf_counter() - t1,
+                "error": f"{type(err).__name__}: {err}", "cause_found": "error", "gain": 0.0,
+                "causes_found": [], "exponent": None, "exponent_interval": None,
+                "candidates": []}
     t_diag = time.perf_counter() - t1
     ivl = getattr(d, "exponent_interval_", None)
     return {**job, "case": case, "t_sim": t_sim, "t_diag": t_diag,
@@ -344,6 +350,8 @@ def series_section(records: list[dict], variants: list[tuple[int, bool]]) -> str
                 first.append(f"{100 * hit / len(eff):.0f} %")
                 extra.append(f"{n_extra}")
             rows += [first, extra]
+        errors = [f"{k[0]} ({vname[v]}): {complete[k][v]['error']}" for k in complete
+                  for v in variants if "error" in complete[k][v]]
         for v in variants:
             t = np.array([complete[k][v]["t_diag"] for k in complete])
             null = [complete[k][v] for k in complete if k[0] == "none"]
@@ -358,6 +366,8 @@ def series_section(records: list[dict], variants: list[tuple[int, bool]]) -> str
                    + md_table(["true cause", "draws", *[vname[v] for v in variants]], rows)
                    + "\n\n" + md_table(["variant", "false cause on null series",
                                          "diagnosis time median [s]", "max [s]"], null_rows))
+        if errors:
+            out.append("\nDiagnoses that raised (counted as wrong): " + "; ".join(errors))
         conf = [complete[k] for k in complete if k[0] == "contact_geometry"]
         if conf:
             ex_rows = []
