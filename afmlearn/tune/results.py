@@ -9,7 +9,8 @@
 
 and ``<results_dir>/experiment/<study_name>.yaml``: a ``# @package _global_`` config with the
 best parameters (config groups as ``override /group: option`` in its defaults list). Any entry
-point takes it with ``--config-dir <results_dir> +experiment=<study_name>``.
+point takes it with ``--config-dir <results_dir> ... +experiment=<study_name>`` (the option
+before the overrides).
 """
 
 from __future__ import annotations
@@ -164,7 +165,8 @@ def write_results(study: optuna.Study, *, results_dir: str | Path, groups: Itera
     stamp = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     header = (f"Best settings of Optuna study {study.study_name!r} (trial {best.number}, "
               f"value {best.value:.6g}, {len(complete)} complete trials), written {stamp}.\n"
-              f"Use: --config-dir {root} +experiment={study.study_name}")
+              f"Use: python scripts/<entry>.py --config-dir {root} <overrides> "
+              f"+experiment={study.study_name}")
     files["experiment"] = _write_text(root / "experiment" / f"{study.study_name}.yaml",
                                       experiment_config(best.params, groups=groups,
                                                         header=header))
