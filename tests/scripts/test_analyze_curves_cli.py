@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import runpy
 import subprocess
 import sys
 from pathlib import Path
@@ -26,17 +25,6 @@ def simulated(path: Path, *overrides: str) -> Path:
     return path
 
 
-def run_main(monkeypatch, capsys, *args: str) -> tuple[int, str, str]:
-    monkeypatch.setattr(sys, "argv", [str(SCRIPT), *args])
-    code = 0
-    try:
-        runpy.run_path(str(SCRIPT), run_name="__main__")
-    except SystemExit as exc:
-        code = exc.code or 0
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
 @pytest.fixture(scope="module")
 def curve_path(tmp_path_factory) -> Path:
     return simulated(tmp_path_factory.mktemp("curves") / "curve.h5", "scenario=lockin",
@@ -51,7 +39,7 @@ def steady_path(tmp_path_factory) -> Path:
 
 
 @pytest.mark.parametrize("case", ["missing", "not_hdf5", "not_a_curve"])
-def test_bad_input_exits_2_with_one_line(tmp_path, monkeypatch, capsys, steady_path, case):
+def test_bad_input_exits_2_with_one_line(tmp_path, run_script, steady_path, case):
     if case == "missing":
         path = tmp_path / "nope.h5"
     elif case == "not_hdf5":
@@ -59,11 +47,7 @@ def test_bad_input_exits_2_with_one_line(tmp_path, monkeypatch, capsys, steady_p
         path.write_bytes(b"not an hdf5 file")
     else:
         path = steady_path
-    code, _, err = run_main(monkeypatch, capsys, f"trace={path}", f"out_dir={tmp_path}/o")
-    assert code == 2
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ")
-    assert "Traceback" not in err
+    run_script.error_line("analyze_curves.py", f"trace={path}", f"out_dir={tmp_path}/o")
 
 
 @pytest.mark.slow

@@ -4,9 +4,7 @@ result in calibration.json taken by convert.py), and one line + exit 2 on bad in
 from __future__ import annotations
 
 import json
-import runpy
 import shutil
-import sys
 from pathlib import Path
 
 import pytest
@@ -19,22 +17,10 @@ NID = DATA / "nanosurf_thermal_tune" / "thermal.nid"
 IBW = DATA / "asylum_am_approach_curves" / "AZ_0052.ibw"
 
 
-def run(script: str, monkeypatch, capsys, *args: str) -> tuple[int, str, str]:
-    path = ROOT / "scripts" / script
-    monkeypatch.setattr(sys, "argv", [str(path), *args])
-    code = 0
-    try:
-        runpy.run_path(str(path), run_name="__main__")
-    except SystemExit as exc:
-        code = exc.code or 0
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
-def test_nanosurf_calibration_and_convert_takes_it(tmp_path, monkeypatch, capsys):
+def test_nanosurf_calibration_and_convert_takes_it(tmp_path, run_script):
     out = tmp_path / "cal"
-    code, stdout, err = run("calibrate.py", monkeypatch, capsys, f"spectrum={NID}",
-                            f"out_dir={out}", "compare=false")
+    code, stdout, err = run_script("calibrate.py", f"spectrum={NID}", f"out_dir={out}",
+                                   "compare=false")
     assert code == 0, err
     cal = json.loads((out / "calibration.json").read_text())
     assert (out / "thermal_fit.png").stat().st_size > 10_000
@@ -51,8 +37,8 @@ def test_nanosurf_calibration_and_convert_takes_it(tmp_path, monkeypatch, capsys
     assert 7 < cal["spring_constant_n_per_m"] < 11
     assert cal["equipartition_k_n_per_m"] == pytest.approx(
         cal["spring_constant_n_per_m"] / 0.817, rel=1e-6)
-    code, _, err = run("convert.py", monkeypatch, capsys, f"input={IBW}",
-                       f"output={tmp_path / 'c.h5'}", f"calibration={out / 'calibration.json'}")
+    code, _, err = run_script("convert.py", f"input={IBW}", f"output={tmp_path / 'c.h5'}",
+                              f"calibration={out / 'calibration.json'}")
     assert code == 0, err
     trace = read_trace(tmp_path / "c.h5")
     assert trace.quality_factor == pytest.approx(cal["quality_factor"])
@@ -60,7 +46,7 @@ def test_nanosurf_calibration_and_convert_takes_it(tmp_path, monkeypatch, capsys
 
 
 @pytest.mark.parametrize("kind", ["missing", "not_a_spectrum", "truncated", "bad_correction"])
-def test_bad_input_exits_2_with_one_line(kind, tmp_path, monkeypatch, capsys):
+def test_bad_input_exits_2_with_one_line(kind, tmp_path, run_script):
     args = [f"out_dir={tmp_path / 'o'}", "figures=false", "compare=false"]
     if kind == "missing":
         args.append(f"spectrum={tmp_path / 'none.nid'}")
@@ -73,7 +59,4 @@ def test_bad_input_exits_2_with_one_line(kind, tmp_path, monkeypatch, capsys):
     else:
         shutil.copy(NID, tmp_path / "ok.nid")
         args += [f"spectrum={tmp_path / 'ok.nid'}", "correction=sader"]
-    code, out, err = run("calibrate.py", monkeypatch, capsys, *args)
-    assert code == 2
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in err
+    run_script.error_line("calibrate.py", *args)

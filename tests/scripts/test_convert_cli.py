@@ -3,7 +3,6 @@ status 2 and exactly one line (damaged copies of the real files made in tmp_path
 
 from __future__ import annotations
 
-import runpy
 import shutil
 import sys
 from pathlib import Path
@@ -21,25 +20,13 @@ JPK = DATA / "afmformats_forcecurves" / "fmt-jpk-fd_spot3-0192.jpk-force"
 STATIC = DATA / "afmformats_forcecurves" / "fmt-igor-fd_SiN_FD_plot.ibw"
 
 
-def run(monkeypatch, capsys, *args: str) -> tuple[int, str, str]:
-    """Exit status, stdout and stderr of ``python scripts/convert.py *args`` (in process)."""
-    monkeypatch.setattr(sys, "argv", [str(SCRIPT), *args])
-    code = 0
-    try:
-        runpy.run_path(str(SCRIPT), run_name="__main__")
-    except SystemExit as exc:
-        code = exc.code or 0
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
-def test_convert_ibw_to_trace_and_static_curve(tmp_path, monkeypatch, capsys):
-    code, out, err = run(monkeypatch, capsys, f"input={IBW}", f"output={tmp_path / 'a.h5'}",
+def test_convert_ibw_to_trace_and_static_curve(tmp_path, run_script):
+    code, out, err = run_script("convert.py", f"input={IBW}", f"output={tmp_path / 'a.h5'}",
                          "quality_factor=200")
     assert code == 0, err
     trace = read_trace(tmp_path / "a.h5")
     assert trace.quality_factor == 200.0 and trace.is_curves
-    code, out, err = run(monkeypatch, capsys, f"input={STATIC}", f"output={tmp_path / 's.h5'}")
+    code, out, err = run_script("convert.py", f"input={STATIC}", f"output={tmp_path / 's.h5'}")
     assert code == 0 and "force_curve" in out
 
 
@@ -103,14 +90,11 @@ def _damaged(kind: str, tmp: Path) -> tuple[Path, list[str], str]:
     "empty", "unknown_format", "wrong_extension_ibw_as_jpk", "wrong_extension_jpk_as_ibw",
     "truncated_ibw", "truncated_jpk", "flipped_ibw_header", "flipped_jpk",
     "missing_calibration", "wrong_units", "bad_calibration_json"])
-def test_bad_input_exits_2_with_one_line(kind, tmp_path, monkeypatch, capsys):
+def test_bad_input_exits_2_with_one_line(kind, tmp_path, run_script):
     path, extra, fragment = _damaged(kind, tmp_path)
     out_file = tmp_path / "out.h5"
-    code, out, err = run(monkeypatch, capsys, f"input={path}", f"output={out_file}", *extra)
-    assert code == 2, (kind, out, err)
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), err
-    assert "Traceback" not in err and fragment in lines[0], lines[0]
+    line = run_script.error_line("convert.py", f"input={path}", f"output={out_file}", *extra)
+    assert fragment in line, line
     assert not out_file.exists()
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import runpy
 import subprocess
 import sys
 from pathlib import Path
@@ -39,22 +38,14 @@ def test_diagnose_cli_writes_report(tmp_path, trace_path):
     assert (out / "report.md").exists() and (out / ".hydra" / "config.yaml").exists()
 
 
-def _run_main(monkeypatch, capsys, *args: str) -> tuple[int, str]:
-    script = ROOT / "scripts" / "diagnose.py"
-    monkeypatch.setattr(sys, "argv", [str(script), *args])
-    with pytest.raises(SystemExit) as exc:
-        runpy.run_path(str(script), run_name="__main__")
-    return exc.value.code, capsys.readouterr().err
-
-
 @pytest.mark.parametrize("args, needle", [
     (("trace=/nonexistent/file.h5",), "no such file"),
     (("diagnoser.heldout_fraction=0.9",), "heldout_fraction"),
     (("row=3",), "row"),
 ])
-def test_bad_input_exits_2(tmp_path, trace_path, monkeypatch, capsys, args, needle):
+def test_bad_input_exits_2(tmp_path, trace_path, run_script, args, needle):
     base = [f"trace={trace_path}", f"out_dir={tmp_path / 'o'}", "figures=false"]
     over = {a.split("=")[0] for a in args}
-    code, err = _run_main(monkeypatch, capsys, *[a for a in base if a.split("=")[0] not in over],
-                          *args)
-    assert code == 2 and needle in err and err.startswith("error:")
+    line = run_script.error_line("diagnose.py",
+                                 *[a for a in base if a.split("=")[0] not in over], *args)
+    assert needle in line, line

@@ -4,9 +4,6 @@ and one line + exit 2 on bad input."""
 from __future__ import annotations
 
 import json
-import runpy
-import sys
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -14,30 +11,16 @@ import numpy as np
 from afmlearn.freeosc import simulate_free
 from simulator.sensor import DetectorNonlinearity, GaussianNoise, SensorChain
 
-ROOT = Path(__file__).resolve().parents[2]
-SCRIPT = ROOT / "scripts" / "diagnose_free.py"
 
-
-def run(monkeypatch, capsys, *args: str) -> tuple[int, str, str]:
-    monkeypatch.setattr(sys, "argv", [str(SCRIPT), *args])
-    code = 0
-    try:
-        runpy.run_path(str(SCRIPT), run_name="__main__")
-    except SystemExit as exc:
-        code = exc.code or 0
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
-def test_synthetic_record_end_to_end(tmp_path, monkeypatch, capsys):
+def test_synthetic_record_end_to_end(tmp_path, run_script):
     sensor = SensorChain([DetectorNonlinearity(a2=-0.1), GaussianNoise(level=0.01)], seed=1)
     y, spp = simulate_free(n_periods=1500, modulation_periods=500.0, sensor=sensor)
     path = tmp_path / "record.h5"
     with h5py.File(path, "w") as f:
         f["s"] = 0.2 * y  # "nm"
     out = tmp_path / "out"
-    code, stdout, err = run(monkeypatch, capsys, f"record={path}", f"out_dir={out}",
-                            f"calibration.sample_rate_hz={spp * 60e3}", "block_periods=100")
+    code, stdout, err = run_script("diagnose_free.py", f"record={path}", f"out_dir={out}",
+                                   f"calibration.sample_rate_hz={spp * 60e3}", "block_periods=100")
     assert code == 0, err
     report = json.loads((out / "report.json").read_text())
     assert report["cause"] == "detector_nonlinearity"
@@ -46,14 +29,10 @@ def test_synthetic_record_end_to_end(tmp_path, monkeypatch, capsys):
     assert "detector_nonlinearity" in stdout
 
 
-def test_bad_input_one_line_exit_2(tmp_path, monkeypatch, capsys):
+def test_bad_input_one_line_exit_2(tmp_path, run_script):
     missing = tmp_path / "nope.h5"
-    code, _, err = run(monkeypatch, capsys, f"record={missing}", f"out_dir={tmp_path / 'o'}")
-    assert code == 2
-    assert err.startswith("error:") and err.strip().count("\n") == 0
+    run_script.error_line("diagnose_free.py", f"record={missing}", f"out_dir={tmp_path / 'o'}")
     short = tmp_path / "short.h5"
     with h5py.File(short, "w") as f:
         f["s"] = np.cos(np.arange(200) * 2 * np.pi / 19)
-    code, _, err = run(monkeypatch, capsys, f"record={short}", f"out_dir={tmp_path / 'o2'}")
-    assert code == 2
-    assert err.startswith("error:") and err.strip().count("\n") == 0
+    run_script.error_line("diagnose_free.py", f"record={short}", f"out_dir={tmp_path / 'o2'}")

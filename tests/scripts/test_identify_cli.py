@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import runpy
 import shutil
 import subprocess
 import sys
@@ -28,20 +27,6 @@ def run_identify(tmp: Path, *args: str) -> subprocess.CompletedProcess[str]:
         [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
     return subprocess.run([sys.executable, str(ROOT / "scripts" / "identify.py"), *args],
                           cwd=tmp, env=env, capture_output=True, text=True, timeout=600)
-
-
-@pytest.fixture(scope="module")
-def script() -> Path:
-    return ROOT / "scripts" / "identify.py"
-
-
-def run_main(script, monkeypatch, capsys, *args: str) -> tuple[int, str]:
-    """Exit status and stderr of ``python scripts/identify.py *args``, run in this process
-    (``runpy`` as ``__main__``: the imports are paid once for all bad-input cases)."""
-    monkeypatch.setattr(sys, "argv", [str(script), *args])
-    with pytest.raises(SystemExit) as exc:
-        runpy.run_path(str(script), run_name="__main__")
-    return exc.value.code, capsys.readouterr().err
 
 
 @pytest.fixture(scope="module")
@@ -118,30 +103,25 @@ def test_bad_input_subprocess_exit_status(tmp_path, trace_path):
 
 
 @pytest.mark.parametrize("case", sorted(BAD))
-def test_bad_input_exits_non_zero_with_a_clear_message(tmp_path, trace_path, case, script,
-                                                      monkeypatch, capsys):
+def test_bad_input_exits_non_zero_with_a_clear_message(tmp_path, trace_path, case, run_script):
     """Each kind of bad input (scripts/identify.py main run in-process: imports paid once)."""
     edit, needle = BAD[case]
     bad = _copy(trace_path, tmp_path / "bad.h5", edit)
     out = tmp_path / "out"
-    code, err = run_main(script, monkeypatch, capsys, f"trace={bad}", f"out_dir={out}",
-                         "identifier=fast")
-    assert code == 2, err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), err
-    assert needle.lower() in lines[0].lower(), lines[0]
+    line = run_script.error_line("identify.py", f"trace={bad}", f"out_dir={out}",
+                                 "identifier=fast")
+    assert needle.lower() in line.lower(), line
     assert not (out / "result.json").exists()
 
 
-def test_missing_file(tmp_path, script, monkeypatch, capsys):
-    code, err = run_main(script, monkeypatch, capsys, f"trace={tmp_path / 'nope.h5'}",
-                         f"out_dir={tmp_path / 'o'}")
-    assert code == 2
-    assert err.startswith("error: ") and "nope.h5" in err
+def test_missing_file(tmp_path, run_script):
+    line = run_script.error_line("identify.py", f"trace={tmp_path / 'nope.h5'}",
+                                 f"out_dir={tmp_path / 'o'}")
+    assert "nope.h5" in line
 
 
 @pytest.mark.slow
-def test_series_file_all_rows_jointly_and_bad_row(tmp_path, script, monkeypatch, capsys):
+def test_series_file_all_rows_jointly_and_bad_row(tmp_path, run_script):
     """A set-point series: every row jointly by default (the exponent line is printed);
     an out-of-range `row` is one clear error line with exit status 2."""
     path = tmp_path / "series.h5"
@@ -152,9 +132,9 @@ def test_series_file_all_rows_jointly_and_bad_row(tmp_path, script, monkeypatch,
             "cantilever.quality_factor=120", "noise.level=0.002", "free_trace_periods=5",
             "progress=false", f"output={path}"])
     simulate(cfg)
-    code, err = run_main(script, monkeypatch, capsys, f"trace={path}",
-                         f"out_dir={tmp_path / 'bad'}", "row=7", "figures=false")
-    assert code == 2 and err.startswith("error: row must be null") and err.count("\n") == 1
+    line = run_script.error_line("identify.py", f"trace={path}", f"out_dir={tmp_path / 'bad'}",
+                                 "row=7", "figures=false")
+    assert line.startswith("error: row must be null")
     out = tmp_path / "out"
     proc = run_identify(tmp_path, f"trace={path}", f"out_dir={out}", "identifier=fast",
                         "figures=true", "identifier.refine=false")
