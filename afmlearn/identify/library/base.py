@@ -22,24 +22,11 @@ from typing import final
 import numpy as np
 from numpy.typing import NDArray
 
+from simulator.forces.law import Kind  # the one table of family codes (shared kernel)
+
 __all__ = ["AbstractTerm", "TermInput", "Kind"]
 
 FloatArray = NDArray[np.float64]
-
-
-@final
-class Kind:
-    """Integer codes of the term families understood by the compiled kernel."""
-
-    CONSTANT = 1
-    DEFLECTION_POWER = 2
-    INVERSE_POWER = 3
-    CONTACT = 4
-    INDENTATION = 5
-    INDENTATION_RATE = 6
-    GAP_RATE = 7
-    EXPONENTIAL_DAMPING = 8
-    SPHERE_ELECTROSTATIC = 9
 
 
 @final

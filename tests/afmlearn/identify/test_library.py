@@ -51,8 +51,9 @@ def test_library_codes_are_the_simulator_force_law_codes():
     from afmlearn.identify.library.base import Kind as LibKind
     from simulator.forces import Kind
 
-    codes = {k: v for k, v in vars(LibKind).items() if k.isupper()}
-    assert codes and all(getattr(Kind, k) == v for k, v in codes.items())
+    assert LibKind is Kind  # one table, not a copy kept in step
+    codes = {v for k, v in vars(Kind).items() if k.isupper() and isinstance(v, int)}
+    assert set(LIB.encode()[0].tolist()) <= codes  # every library term has a known family
 
 
 @pytest.mark.parametrize("term", [t for t in LIB if t.potential(_orbit()) is not None],
