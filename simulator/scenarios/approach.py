@@ -11,7 +11,7 @@ import numpy as np
 from ..forces.base import check_range
 from ..integrate.state import State
 from ..system import System
-from .base import AbstractScenario, as_result, settle
+from .base import AbstractScenario, as_result, ramp, settle
 from .result import SimulationResult
 
 __all__ = ["Approach"]
@@ -61,12 +61,9 @@ class Approach(AbstractScenario):
                        periods=sp, progress=progress)
         n = int(round(self.n_periods * self.samples_per_period))
         rate = (self.gap_end - self.gap_start) / (n * self.dt)
-        segs = [self.integrator.run(system, state, omega=self.omega, n_samples=n, dt=self.dt,
-                                    gap_rate=rate, record_velocity=self.record_velocity)]
-        if self.retract:
-            segs.append(self.integrator.run(system, segs[0].end, omega=self.omega, n_samples=n,
-                                            dt=self.dt, gap_rate=-rate,
-                                            record_velocity=self.record_velocity))
+        segs = ramp(system, state, integrator=self.integrator, omega=self.omega, dt=self.dt,
+                    n_samples=n, rate=rate, legs=2 if self.retract else 1,
+                    record_velocity=self.record_velocity)
         if progress is not None:
             progress(n * len(segs))
         result = as_result(system, self.name, segs, self.to_dict())

@@ -55,6 +55,26 @@ def settle(system: System, state: State, *, integrator: AbstractIntegrator,
     return state
 
 
+def ramp(system: System, state: State, *, integrator: AbstractIntegrator, omega: float,
+         dt: float, n_samples: int, rate: float, legs: int, drift: float = 0.0,
+         record_velocity: bool = False) -> list[Segment]:
+    """Ramp the rest gap at ``rate`` (approach), then at ``-rate`` back (``legs=2``).
+
+    Each leg is ``n_samples`` samples; ``drift`` (a constant rest-gap rate, e.g. thermal
+    drift) is added to both legs. Returns the recorded segments, each starting where the
+    previous one ended.
+    """
+    if legs not in (1, 2):
+        raise ValueError(f"legs must be 1 or 2, got {legs!r}")
+    segs: list[Segment] = []
+    for sign in (1.0, -1.0)[:legs]:
+        start = state if not segs else segs[-1].end
+        segs.append(integrator.run(system, start, omega=omega, n_samples=n_samples, dt=dt,
+                                   gap_rate=sign * rate + drift,
+                                   record_velocity=record_velocity))
+    return segs
+
+
 def auto_settle_periods(system: System) -> float:
     """Default settling time: ``2.5 Q_1`` drive periods (transient decays by ~e^-8)."""
     return 2.5 * float(system.cantilever.quality_factors[0])

@@ -20,7 +20,7 @@ from ..forces.base import check_range
 from ..integrate.state import State
 from ..lockin import LockIn
 from ..system import System
-from .base import AbstractScenario, as_result, settle
+from .base import AbstractScenario, as_result, ramp, settle
 from .result import SimulationResult
 
 __all__ = ["LockInCurve", "CurveRecord"]
@@ -122,12 +122,9 @@ class LockInCurve(AbstractScenario):
                        periods=sp, progress=progress)
         n = int(round(self.n_periods * self.samples_per_period))
         rate = (self.gap_end - self.gap_start) / (n * self.dt)
-        segs = []
-        for sign in (1.0, -1.0):
-            start = state if not segs else segs[-1].end
-            segs.append(self.integrator.run(system, start, omega=self.omega, n_samples=n,
-                                            dt=self.dt, gap_rate=sign * rate + self.drift,
-                                            record_velocity=self.record_velocity))
+        segs = ramp(system, state, integrator=self.integrator, omega=self.omega, dt=self.dt,
+                    n_samples=n, rate=rate, legs=2, drift=self.drift,
+                    record_velocity=self.record_velocity)
         if progress is not None:
             progress(2 * n)
         meta = self.to_dict()
