@@ -37,8 +37,8 @@ from afmlearn.preprocess import HarmonicFit
 
 from .spec import ModelSpec, neck_state
 
-__all__ = ["PeriodicOrbit", "HarmonicBalance", "Solution", "N_LEVER", "harmonics", "to_real",
-           "from_real", "synthesize", "invert_detector"]
+__all__ = ["PeriodicOrbit", "HarmonicBalance", "Solution", "bounded_lstsq", "N_LEVER",
+           "harmonics", "to_real", "from_real", "synthesize", "invert_detector"]
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -148,6 +148,36 @@ class PeriodicOrbit:
         x = invert_detector(self.y, *spec.detector)
         X = harmonics(x, self.n_h)
         return synthesize(X, self.grid), synthesize(X, self.grid, 1, self.omega), X
+
+
+def bounded_lstsq(A: FloatArray, b: FloatArray, P: FloatArray, t: FloatArray, lo: FloatArray,
+                  hi: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Bounded linear least squares of the whitened rows ``A c = b`` and the prior rows
+    ``P c = t`` (BVLS on unit-norm columns, for conditioning).
+
+    Parameters
+    ----------
+    A : ndarray, shape (m, p)
+        Whitened data rows; ``b`` shape (m,).
+    P : ndarray, shape (k, p)
+        Calibration-prior rows (sigma units); ``t`` shape (k,).
+    lo, hi : ndarray, shape (p,)
+        Bounds of the coefficients.
+
+    Returns
+    -------
+    coef : ndarray, shape (p,)
+    residual : ndarray, shape (m + k,)
+        ``[A; P] coef - [b; t]``.
+    """
+    Af = np.vstack([A, P])
+    bf = np.concatenate([b, t])
+    scale = np.linalg.norm(Af, axis=0)
+    scale[scale == 0] = 1.0
+    res = lsq_linear(Af / scale, bf, bounds=(lo * scale, hi * scale), method="bvls",
+                     lsmr_tol="auto")
+    coef = res.x / scale
+    return coef, Af @ coef - bf
 
 
 @final
@@ -347,17 +377,7 @@ class HarmonicBalance:
     def solve(self, spec: ModelSpec, values: tuple[float, ...] = ()) -> Solution:
         """Bounded linear least squares of the whitened rows plus calibration priors."""
         A, b = self.design(spec)
-        p = A.shape[1]
         lo, hi = self.bounds(spec)
-        P, t = self.prior_rows(p)
-        Af = np.vstack([A, P])
-        bf = np.concatenate([b, t])
-        # column scaling for conditioning
-        scale = np.linalg.norm(Af, axis=0)
-        scale[scale == 0] = 1.0
-        res = lsq_linear(Af / scale, bf, bounds=(lo * scale, hi * scale), method="bvls",
-                         lsmr_tol="auto")
-        coef = res.x / scale
-        r = Af @ coef - bf
+        coef, r = bounded_lstsq(A, b, *self.prior_rows(A.shape[1]), lo, hi)
         return Solution(spec=spec, coef=coef, residual=r, chi2=float(r @ r),
                         values=tuple(values))

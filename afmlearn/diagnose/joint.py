@@ -16,9 +16,8 @@ from typing import final
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import lsq_linear
 
-from .balance import HarmonicBalance, Solution
+from .balance import HarmonicBalance, Solution, bounded_lstsq
 from .spec import ModelSpec
 
 __all__ = ["JointBalance", "PhasePrior", "wrap"]
@@ -93,17 +92,9 @@ class JointBalance:
         blocks = [hb.design(spec, ph) for hb, ph in zip(self.balances, phases, strict=True)]
         A = np.vstack([a for a, _ in blocks])
         b = np.concatenate([bb for _, bb in blocks])
-        p = A.shape[1]
         lo, hi = self.bounds(spec)
-        P, t = self.balances[0].prior_rows(p)
-        Af = np.vstack([A, P])
-        bf = np.concatenate([b, t])
-        scale = np.linalg.norm(Af, axis=0)
-        scale[scale == 0] = 1.0
-        res = lsq_linear(Af / scale, bf, bounds=(lo * scale, hi * scale), method="bvls",
-                         lsmr_tol="auto")
-        coef = res.x / scale
-        r = np.concatenate([Af @ coef - bf, self.phase_residual(phases)])
+        coef, r = bounded_lstsq(A, b, *self.balances[0].prior_rows(A.shape[1]), lo, hi)
+        r = np.concatenate([r, self.phase_residual(phases)])
         return Solution(spec=spec, coef=coef, residual=r, chi2=float(r @ r),
                         values=tuple(values), phases=tuple(float(x) for x in phases))
 
