@@ -16,7 +16,12 @@ import math
 from dataclasses import dataclass
 from typing import final
 
+import numpy as np
+from numpy.typing import NDArray
+
 __all__ = ["CalibrationConstraints"]
+
+FloatArray = NDArray[np.float64]
 
 
 def _frac(name: str, v: float | None, *, allow_none: bool = True) -> None:
@@ -74,3 +79,35 @@ class CalibrationConstraints:
         if which == "drive" and self.drive_uncertainty is None:
             return {"free_deflection": 0.01, "free_amplitude": 0.03}.get(drive_source)
         return getattr(self, f"{which}_uncertainty")
+
+    def prior_gram(self, p: int, *, quality_factor: float, drive_amplitude: float | None,
+                   drive_source: str, noise_variance: float,
+                   drive_index: int = 2) -> tuple[FloatArray, FloatArray]:
+        """The calibration priors as Gram additions ``sum_k w_k^2 (xi_k - mu_k)^2``.
+
+        The lever's coefficients are ``xi_0 = -D`` (mean ``-1/Q``), ``xi_1 = -K`` (mean -1)
+        and ``xi_drive_index = B`` (mean ``F_c``; no drive prior when ``drive_amplitude`` is
+        None). A prior of relative width ``rel`` weighs ``w^2 = noise_variance /
+        (rel |mu|)^2``, i.e. it counts as one row of that noise.
+
+        Returns
+        -------
+        G0 : ndarray, shape (p, p)
+            Diagonal additions to the Gram matrix.
+        b0 : ndarray, shape (p,)
+            Additions to the right-hand side.
+        """
+        G0, b0 = np.zeros((p, p)), np.zeros(p)
+        pri: list[tuple[int, float, float | None]] = [
+            (0, -1.0 / quality_factor, self.prior("damping")),
+            (1, -1.0, self.prior("stiffness")),
+        ]
+        if drive_amplitude is not None:
+            pri.append((drive_index, drive_amplitude, self.prior("drive", drive_source)))
+        for k, mu, rel in pri:
+            if rel is None:
+                continue
+            w2 = noise_variance / (rel * abs(mu)) ** 2
+            G0[k, k] += w2
+            b0[k] += w2 * mu
+        return G0, b0

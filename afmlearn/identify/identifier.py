@@ -638,7 +638,6 @@ class ForceIdentifier:
     def _prior_gram(self, des: _Design) -> tuple[FloatArray, FloatArray]:
         """Calibration priors as Gram additions ``sum_k w_k^2 (xi_k - mu_k)^2``."""
         p = des.theta.shape[1]
-        G0, b0 = np.zeros((p, p)), np.zeros(p)
         if self._sigma2 is None:
             # row noise from a dense box-constrained fit (no threshold, no prior)
             tmpl = self._template()
@@ -647,22 +646,11 @@ class ForceIdentifier:
             r = des.y - des.theta @ c
             dof = max(des.theta.shape[0] - p, 1)
             self._sigma2 = float(r @ r / dof) or 1e-30
-        s2 = self._sigma2
-        cal, cons = self._cal, self._cons
-        pri: list[tuple[int, float, float | None]] = [
-            (0, -1.0 / cal.quality_factor, cons.prior("damping")),
-            (1, -1.0, cons.prior("stiffness")),
-        ]
-        if cal.drive_amplitude is not None and self._drive_rotated:
-            w_drive = cons.prior("drive", cal.drive_source)
-            pri.append((2, cal.drive_amplitude, w_drive))
-        for k, mu, rel in pri:
-            if rel is None:
-                continue
-            w2 = s2 / (rel * abs(mu)) ** 2
-            G0[k, k] += w2
-            b0[k] += w2 * mu
-        return G0, b0
+        cal = self._cal
+        return self._cons.prior_gram(
+            p, quality_factor=cal.quality_factor,
+            drive_amplitude=cal.drive_amplitude if self._drive_rotated else None,
+            drive_source=cal.drive_source, noise_variance=self._sigma2)
 
     def _with_prior_rows(self, des: _Design) -> tuple[FloatArray, FloatArray]:
         """Rows with the prior as pseudo-rows, spread evenly over the CV blocks.

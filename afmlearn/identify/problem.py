@@ -378,23 +378,13 @@ class JointProblem:
 
     def prior(self, p: int) -> tuple[FloatArray, FloatArray]:
         """Calibration and drive-phase priors as Gram additions (shape (p, p), (p,))."""
-        G0, b0 = np.zeros((p, p)), np.zeros(p)
         s2 = self.noise_scale
-        cons = self.constraints
-        pri: list[tuple[int, float, float | None]] = [
-            (0, -1.0 / self.quality_factor, cons.prior("damping")),
-            (1, -1.0, cons.prior("stiffness")),
-        ]
         fc = self.drive_amplitude
         rot = self.rotated
-        if rot.any() and fc is not None:
-            pri.append((N_LEVER, fc, cons.prior("drive", self.drive_source)))
-        for k, mu, rel in pri:
-            if rel is None:
-                continue
-            w2 = s2 / (rel * abs(mu)) ** 2
-            G0[k, k] += w2
-            b0[k] += w2 * mu
+        G0, b0 = self.constraints.prior_gram(
+            p, quality_factor=self.quality_factor,
+            drive_amplitude=fc if rot.any() else None, drive_source=self.drive_source,
+            noise_variance=s2, drive_index=N_LEVER)
         if fc is not None:
             # recorded phase: the quadrature B sin(dphi) ~ F_c dphi has a prior of width
             # F_c * width about 0
