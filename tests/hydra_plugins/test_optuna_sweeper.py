@@ -25,7 +25,6 @@ def _finished_params(study: optuna.Study) -> list[tuple]:
     return [tuple(sorted(t.params.items())) for t in study.get_trials(states=FINISHED)]
 
 
-@pytest.mark.slow
 def test_sigkill_mid_trial_then_resume(tmp_path: Path, toy_cmd, run_toy) -> None:
     url = f"sqlite:///{tmp_path / 'toy.db'}"
     marks = tmp_path / "marks"
@@ -66,7 +65,6 @@ def test_sigkill_mid_trial_then_resume(tmp_path: Path, toy_cmd, run_toy) -> None
     assert "study toy (minimize): 4 complete" in done.stdout
 
 
-@pytest.mark.slow
 def test_two_workers_share_sqlite(tmp_path: Path, run_toy) -> None:
     url = f"sqlite:///{tmp_path / 'toy.db'}"
     marks = tmp_path / "marks"

@@ -15,7 +15,6 @@ from afmlearn.tune import FINISHED
 TOY = Path(__file__).parents[2] / "hydra_plugins" / "app" / "toy.py"
 
 
-@pytest.mark.slow
 def test_two_workers_share_postgresql(tmp_path: Path, postgres_url: str) -> None:
     marks = tmp_path / "marks"
     cmd = [sys.executable, str(TOY), "-m", f"hydra.sweeper.storage={postgres_url}",
