@@ -8,7 +8,6 @@ import sys
 from pathlib import Path
 
 import optuna
-import pytest
 
 from afmlearn.tune import FINISHED
 
