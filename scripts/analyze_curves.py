@@ -13,10 +13,10 @@ group is never read. Bad input prints `error: ...` (one line) and exits with sta
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import hydra
+from _cli import bad_input_exits
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
@@ -28,7 +28,7 @@ from afmlearn.plots.curves import curve_figures, plot_parameter_spread
 def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.curves.analyze.analyze_curve` and print the finding."""
     figures = curve_figures if cfg.figures else None
-    try:
+    with bad_input_exits(ValueError, OSError):  # RecordingError, TraceFormatError: ValueErrors
         if Path(cfg.trace).is_dir():
             summary = analyze_folder(cfg.trace, cfg.out_dir,
                                      make_diagnoser=lambda: instantiate(cfg.diagnoser),
@@ -42,10 +42,6 @@ def main(cfg: DictConfig) -> None:
         diagnoser = instantiate(cfg.diagnoser)
         report = analyze_curve(cfg.trace, cfg.out_dir, diagnoser=diagnoser, index=cfg.index,
                                figures=figures)
-    except (ValueError, OSError) as err:  # RecordingError and TraceFormatError are ValueErrors
-        print(f"error: {str(err).splitlines()[0] if str(err) else type(err).__name__}",
-              file=sys.stderr)
-        sys.exit(2)
     print(f"cause: {report['cause']} (confidence {report['confidence']:.2f}, held-out gain "
           f"{report['gain']:.3f})")
     print(f"baseline: {report['baseline']['equation']}")

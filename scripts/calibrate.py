@@ -16,9 +16,8 @@ thermal_fit.png. Bad input prints `error: ...` (one line) and exits with status 
 
 from __future__ import annotations
 
-import sys
-
 import hydra
+from _cli import bad_input_exits
 from omegaconf import DictConfig, OmegaConf
 
 from afmlearn.calibrate import ThermalCorrection
@@ -29,7 +28,7 @@ from afmlearn.calibrate.windows import WINDOWS
 @hydra.main(config_path="../conf", config_name="calibrate", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.calibrate.report.calibrate_file`, draw the fit, print the result."""
-    try:
+    with bad_input_exits(ValueError, OSError):  # RecordingError, bad settings: ValueErrors
         read = {k: v for k, v in OmegaConf.to_container(cfg.read).items() if v is not None}
         if "window" in read:
             if read["window"] not in WINDOWS:
@@ -41,9 +40,6 @@ def main(cfg: DictConfig) -> None:
             cfg.spectrum, cfg.out_dir, read_options=read, temperature_k=cfg.temperature_k,
             correction=ThermalCorrection.named(cfg.correction), fit_range_hz=fit_range,
             confidence=float(cfg.confidence), compare=bool(cfg.compare))
-    except (ValueError, OSError) as err:  # RecordingError and bad settings are ValueErrors
-        print(f"error: {err}", file=sys.stderr)
-        sys.exit(2)
     if cfg.figures:
         from afmlearn.plots.calibrate import plot_thermal_fit
 

@@ -15,9 +15,8 @@ exits with status 2.
 
 from __future__ import annotations
 
-import sys
-
 import hydra
+from _cli import bad_input_exits
 from omegaconf import DictConfig, OmegaConf
 
 from afmlearn.io.instruments import CALIBRATION_FIELDS, READ_OPTIONS, convert_recording
@@ -26,15 +25,12 @@ from afmlearn.io.instruments import CALIBRATION_FIELDS, READ_OPTIONS, convert_re
 @hydra.main(config_path="../conf", config_name="convert", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.io.instruments.convert_recording` and list the files written."""
-    try:
+    with bad_input_exits(ValueError, OSError):  # RecordingError, TraceFormatError: ValueErrors
         given = OmegaConf.to_container(cfg)
         overrides = {k: given[k] for k in (*CALIBRATION_FIELDS, *READ_OPTIONS)
                      if given.get(k) is not None}
         written = convert_recording(cfg.input, cfg.output, calibration=cfg.calibration,
                                     **overrides)
-    except (ValueError, OSError) as err:  # RecordingError, TraceFormatError: ValueErrors
-        print(f"error: {err}", file=sys.stderr)
-        sys.exit(2)
     for item in written:
         print(f"wrote {item['path']} ({item['kind']}, {item['n_samples']} samples)")
 

@@ -17,9 +17,8 @@ prints `error: ...` and exits with status 2.
 
 from __future__ import annotations
 
-import sys
-
 import hydra
+from _cli import bad_input_exits
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
@@ -30,13 +29,10 @@ from afmlearn.plots.diagnose import plot_all
 @hydra.main(config_path="../conf", config_name="diagnose", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.diagnose.report.diagnose_trace` and print the verdict."""
-    try:
+    with bad_input_exits(ValueError):  # InputError, TraceFormatError, bad settings
         diagnoser = instantiate(cfg.diagnoser)
         rep = diagnose_trace(cfg.trace, cfg.out_dir, row=cfg.row, diagnoser=diagnoser,
                              figures=plot_all if cfg.figures else None)
-    except ValueError as err:  # InputError, TraceFormatError and bad settings are ValueErrors
-        print(f"error: {err}", file=sys.stderr)
-        sys.exit(2)
     print(f"cause        {rep['cause']}  (confidence {rep['confidence']:.2f})")
     if len(rep["causes"]) > 1:
         print("causes       " + ", then ".join(f"{c['cause']} (gain {c['gain']:+.3f})"

@@ -15,9 +15,8 @@ record too short) prints `error: ...` and exits with status 2.
 
 from __future__ import annotations
 
-import sys
-
 import hydra
+from _cli import bad_input_exits
 from omegaconf import DictConfig, OmegaConf
 
 from afmlearn.freeosc.record import diagnose_recording
@@ -32,15 +31,12 @@ def _figures(diagnosis, y, prediction, out_dir, unit):
 def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.freeosc.record.diagnose_recording` and print the finding."""
     calibration = OmegaConf.to_container(cfg.calibration, resolve=True) or {}
-    try:
+    with bad_input_exits(ValueError, OSError):
         report = diagnose_recording(
             cfg.record, cfg.out_dir, heldout_fraction=cfg.heldout_fraction,
             lever_q=cfg.lever_q, block_periods=cfg.block_periods,
             figures=_figures if cfg.figures else None, column=cfg.column, unit=cfg.unit,
             **calibration)
-    except (ValueError, OSError) as err:
-        print(f"error: {err}".replace("\n", " "), file=sys.stderr)
-        sys.exit(2)
     print(f"cause       {report['cause']}  (confidence {report['confidence']:.2f})")
     print(f"gain        {report['gain']:.4f}  held-out NRMSE "
           f"{report['baseline']['heldout_nrmse']:.4g} -> {report['extended']['heldout_nrmse']:.4g}")

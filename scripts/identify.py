@@ -17,9 +17,8 @@ sweep without `row`) prints `error: ...` and exits with status 2.
 
 from __future__ import annotations
 
-import sys
-
 import hydra
+from _cli import bad_input_exits
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
@@ -31,13 +30,10 @@ from afmlearn.plots.identify import identify_figures
 @hydra.main(config_path="../conf", config_name="identify", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.identify.infer.identify_trace` and print the equation."""
-    try:
+    with bad_input_exits(ValueError):  # InputError, TraceFormatError, bad settings
         identifier = instantiate(cfg.identifier)
         result = identify_trace(cfg.trace, cfg.out_dir, row=cfg.row, identifier=identifier,
                                 figures=identify_figures if cfg.figures else None)
-    except ValueError as err:  # InputError, TraceFormatError and bad settings are ValueErrors
-        print(f"error: {err}", file=sys.stderr)
-        sys.exit(2)
     summary = result["summary"]
     print(result["equation"])
     print(result["equation_si"])

@@ -15,9 +15,8 @@ afmlearn.simulate.simulate. Bad settings print `error: ...` (one line) and exit 
 
 from __future__ import annotations
 
-import sys
-
 import hydra
+from _cli import bad_input_exits
 from omegaconf import DictConfig
 
 from afmlearn.simulate import simulate
@@ -26,11 +25,8 @@ from afmlearn.simulate import simulate
 @hydra.main(config_path="../conf", config_name="simulate", version_base="1.3")
 def main(cfg: DictConfig) -> float:
     """Run :func:`afmlearn.simulate.simulate`; return the amplitude [m] (for sweepers)."""
-    try:
+    with bad_input_exits(ValueError):  # bad settings (and TraceFormatError) name the key
         metrics, _ = simulate(cfg)
-    except ValueError as err:  # bad settings (and TraceFormatError) name the config key
-        print(f"error: {err}", file=sys.stderr)
-        sys.exit(2)
     width = max(len(k) for k in metrics)
     for key, value in metrics.items():
         shown = f"{value:.6g}" if isinstance(value, float) else value

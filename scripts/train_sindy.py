@@ -14,9 +14,9 @@ afmlearn.identify.train.train. Bad settings print `error: ...` and exit with sta
 from __future__ import annotations
 
 import math
-import sys
 
 import hydra
+from _cli import bad_input_exits
 from omegaconf import DictConfig
 
 from afmlearn.identify.train import train
@@ -26,11 +26,8 @@ from afmlearn.plots.identify import training_figures
 @hydra.main(config_path="../conf", config_name="train_sindy", version_base="1.3")
 def main(cfg: DictConfig) -> float:
     """Run :func:`afmlearn.identify.train.train`; return the mean whole-trace force accuracy."""
-    try:
+    with bad_input_exits(ValueError):  # InputError, TraceFormatError, bad settings
         metrics, objects = train(cfg, figures=training_figures)
-    except ValueError as err:  # InputError, TraceFormatError and bad settings are ValueErrors
-        print(f"error: {err}", file=sys.stderr)
-        sys.exit(2)
     width = max(len(k) for k in metrics)
     for key, value in sorted(metrics.items()):
         print(f"{key:<{width}}  {value:.6g}")

@@ -36,6 +36,7 @@ class ScriptRunner:
         """
         path = SCRIPTS / script
         self._monkeypatch.setattr(sys, "argv", [str(path), *args])
+        self._monkeypatch.syspath_prepend(str(SCRIPTS))  # as `python scripts/x.py` has it
         root = logging.getLogger()
         handlers, level = list(root.handlers), root.level
         code = 0
