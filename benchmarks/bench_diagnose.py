@@ -385,7 +385,7 @@ def series_section(records: list[dict], variants: list[tuple[int, bool]]) -> str
                                 f"{sum(e <= 0.1 for e in errs)}/{len(errs)}",
                                 f"{fmt(float(np.median(widths)), 2)}" if widths else "-"])
             out.append("\nContact exponent on the `contact_geometry` draws (true p 1.9-2.4):\n\n"
-                       + md_table(["variant", "median |p - p_true|", "within 0.1",
+                       + md_table(["variant", "median abs(p - p_true)", "within 0.1",
                                    "median 95 % interval width"], ex_rows))
     return "\n".join(out)
 
