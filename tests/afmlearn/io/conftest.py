@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import h5py
 import numpy as np
 import pytest
 
@@ -103,3 +104,19 @@ def assert_same_trace(a: Trace, b: Trace, *, labels: bool) -> None:
 def assert_same() -> Any:
     """`assert_same_trace`, as a fixture (test modules here are not importable)."""
     return assert_same_trace
+
+
+@pytest.fixture
+def h5_names_seen(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """Every name looked up in an HDF5 group (``[]``, ``get``, ``in``) from now on: a spy that
+    proves which groups a reader touches (e.g. never ``/labels``)."""
+    seen: list[str] = []
+    for method in ("__getitem__", "get", "__contains__"):
+        original = getattr(h5py.Group, method)
+
+        def spy(self: h5py.Group, name: Any, *args: Any, _original: Any = original) -> Any:
+            seen.append(str(name))
+            return _original(self, name, *args)
+
+        monkeypatch.setattr(h5py.Group, method, spy)
+    return seen
