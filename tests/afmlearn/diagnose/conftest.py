@@ -54,3 +54,21 @@ def make_series(tmp_path_factory):
         return cache[key]
 
     return make
+
+
+@pytest.fixture
+def labels_guarded(monkeypatch) -> list[str]:
+    """Make the diagnosis' trace reader fail loudly if asked for the labels; returns the
+    paths it read (a test checks the guard was on the path actually taken)."""
+    import afmlearn.io.reader as reader
+
+    real = reader.read_trace
+    reads: list[str] = []
+
+    def guarded(p, *a, labels=False, **kw):
+        assert not labels, "diagnosis asked for the labels"
+        reads.append(str(p))
+        return real(p, *a, labels=labels, **kw)
+
+    monkeypatch.setattr("afmlearn.diagnose.report.read_trace", guarded)
+    return reads

@@ -45,18 +45,11 @@ def test_null_trace_is_none_and_report_follows_design(make_trace, tmp_path):
     assert rep["baseline"]["heldout_nrmse"] < 2e-3
 
 
-def test_labels_are_never_read(make_trace, tmp_path, monkeypatch):
+def test_labels_are_never_read(make_trace, tmp_path, labels_guarded):
     """The diagnosis must not open /labels: make any such read fail loudly."""
     path, _ = make_trace("none", 11)
-    import afmlearn.io.reader as reader
-    real = reader.read_trace
-
-    def guarded(p, *a, labels=False, **kw):
-        assert not labels, "diagnosis asked for the labels"
-        return real(p, *a, labels=labels, **kw)
-
-    monkeypatch.setattr("afmlearn.diagnose.report.read_trace", guarded)
     diagnose_trace(path, tmp_path / "g", diagnoser=Diagnoser(hypotheses=[Viscoelastic()]))
+    assert labels_guarded == [str(path)]
 
 
 def test_name_cause_rule():
@@ -177,17 +170,10 @@ def test_ramp_is_diagnosed_through_quasi_steady_windows(make_series):
     assert nrmse[len(nrmse) // 2] < 0.003 and nrmse[-1] < 0.02
 
 
-def test_series_labels_are_never_read(make_series, tmp_path, monkeypatch):
+def test_series_labels_are_never_read(make_series, tmp_path, labels_guarded):
     path, _ = make_series("none", 3)
-    import afmlearn.io.reader as reader
-    real = reader.read_trace
-
-    def guarded(p, *a, labels=False, **kw):
-        assert not labels, "diagnosis asked for the labels"
-        return real(p, *a, labels=labels, **kw)
-
-    monkeypatch.setattr("afmlearn.diagnose.report.read_trace", guarded)
     rep = diagnose_trace(path, tmp_path / "g", diagnoser=Diagnoser(hypotheses=[]))
+    assert labels_guarded == [str(path)]
     assert rep["cause"] == "none" and len(rep["observations"]) == 4
 
 
