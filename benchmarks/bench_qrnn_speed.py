@@ -41,9 +41,9 @@ from afmlearn.qrnn.scan import ChunkedScan, DoublingScan, fo_pool, fo_pool_refer
 
 BATCH = 64
 N_FEATURES = 2
-AUTO = "QRNN (shipped: window 2, fo, default scan)"
-UPPER1 = "QRNN window 2 / upper 1"
-COMPILED = "QRNN shipped, torch.compile"
+AUTO = "QRNN window 2 / 2 (issue-4 shape), fo, default scan"
+UPPER1 = "QRNN window 2 / 1 (shipped), fo, default scan"
+COMPILED = "QRNN window 2 / 2, torch.compile"
 
 
 def _best_interleaved(fns: dict[str, Callable[[], object]], *, rounds: int,
