@@ -9,9 +9,8 @@ from typing import final
 import numpy as np
 
 from ..forces.base import check_range
-from ..integrate.state import State
 from ..system import System
-from .base import AbstractScenario, as_result, ramp, settle
+from .base import AbstractScenario, as_result, ramp
 from .result import SimulationResult
 
 __all__ = ["Approach"]
@@ -55,17 +54,12 @@ class Approach(AbstractScenario):
         return int(math.ceil((sp + ramps * self.n_periods) * self.samples_per_period))
 
     def run(self, system: System, *, progress=None) -> SimulationResult:
-        sp = self.settle_periods_for(system)
-        state = State.free_orbit(system, omega=self.omega, gap=self.gap_start)
-        state = settle(system, state, integrator=self.integrator, omega=self.omega, dt=self.dt,
-                       periods=sp, progress=progress)
         n = int(round(self.n_periods * self.samples_per_period))
-        rate = (self.gap_end - self.gap_start) / (n * self.dt)
-        segs = ramp(system, state, integrator=self.integrator, omega=self.omega, dt=self.dt,
-                    n_samples=n, rate=rate, legs=2 if self.retract else 1,
-                    record_velocity=self.record_velocity)
-        if progress is not None:
-            progress(n * len(segs))
+        segs = ramp(system, integrator=self.integrator, omega=self.omega, dt=self.dt,
+                    gap_start=self.gap_start, gap_end=self.gap_end, n_samples=n,
+                    settle_periods=self.settle_periods_for(system),
+                    legs=2 if self.retract else 1, record_velocity=self.record_velocity,
+                    progress=progress)
         result = as_result(system, self.name, segs, self.to_dict())
         segment = np.repeat(np.arange(len(segs), dtype=np.int8), n)
         return dataclasses.replace(result, segment=segment)

@@ -55,23 +55,29 @@ def settle(system: System, state: State, *, integrator: AbstractIntegrator,
     return state
 
 
-def ramp(system: System, state: State, *, integrator: AbstractIntegrator, omega: float,
-         dt: float, n_samples: int, rate: float, legs: int, drift: float = 0.0,
-         record_velocity: bool = False) -> list[Segment]:
-    """Ramp the rest gap at ``rate`` (approach), then at ``-rate`` back (``legs=2``).
+def ramp(system: System, *, integrator: AbstractIntegrator, omega: float, dt: float,
+         gap_start: float, gap_end: float, n_samples: int, settle_periods: float, legs: int,
+         drift: float = 0.0, record_velocity: bool = False, progress=None) -> list[Segment]:
+    """Settle on the free orbit at ``gap_start``, then ramp the rest gap to ``gap_end``
+    (approach) and, with ``legs=2``, back (retraction), ``n_samples`` samples per leg.
 
-    Each leg is ``n_samples`` samples; ``drift`` (a constant rest-gap rate, e.g. thermal
-    drift) is added to both legs. Returns the recorded segments, each starting where the
-    previous one ended.
+    ``drift`` (a constant rest-gap rate, e.g. thermal drift) is added to both legs. Returns
+    the recorded segments, each starting where the previous one ended.
     """
     if legs not in (1, 2):
         raise ValueError(f"legs must be 1 or 2, got {legs!r}")
+    state = State.free_orbit(system, omega=omega, gap=gap_start)
+    state = settle(system, state, integrator=integrator, omega=omega, dt=dt,
+                   periods=settle_periods, progress=progress)
+    rate = (gap_end - gap_start) / (n_samples * dt)
     segs: list[Segment] = []
     for sign in (1.0, -1.0)[:legs]:
         start = state if not segs else segs[-1].end
         segs.append(integrator.run(system, start, omega=omega, n_samples=n_samples, dt=dt,
                                    gap_rate=sign * rate + drift,
                                    record_velocity=record_velocity))
+    if progress is not None:
+        progress(n_samples * legs)
     return segs
 
 

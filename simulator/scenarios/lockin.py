@@ -17,10 +17,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..forces.base import check_range
-from ..integrate.state import State
 from ..lockin import LockIn
 from ..system import System
-from .base import AbstractScenario, as_result, ramp, settle
+from .base import AbstractScenario, as_result, ramp
 from .result import SimulationResult
 
 __all__ = ["LockInCurve", "CurveRecord"]
@@ -116,17 +115,11 @@ class LockInCurve(AbstractScenario):
 
     def run(self, system: System, *, progress=None) -> SimulationResult:
         """The time-domain ramp; ``meta["curve"]`` holds the :class:`CurveRecord`."""
-        sp = self.settle_periods_for(system)
-        state = State.free_orbit(system, omega=self.omega, gap=self.gap_start)
-        state = settle(system, state, integrator=self.integrator, omega=self.omega, dt=self.dt,
-                       periods=sp, progress=progress)
         n = int(round(self.n_periods * self.samples_per_period))
-        rate = (self.gap_end - self.gap_start) / (n * self.dt)
-        segs = ramp(system, state, integrator=self.integrator, omega=self.omega, dt=self.dt,
-                    n_samples=n, rate=rate, legs=2, drift=self.drift,
-                    record_velocity=self.record_velocity)
-        if progress is not None:
-            progress(2 * n)
+        segs = ramp(system, integrator=self.integrator, omega=self.omega, dt=self.dt,
+                    gap_start=self.gap_start, gap_end=self.gap_end, n_samples=n,
+                    settle_periods=self.settle_periods_for(system), legs=2, drift=self.drift,
+                    record_velocity=self.record_velocity, progress=progress)
         meta = self.to_dict()
         result = as_result(system, self.name, segs, meta)
         meta["curve"] = self.record(system, result)
