@@ -642,6 +642,21 @@ def _write_curve(cfg: DictConfig, obj: dict[str, Any], path: Path,
     return summary
 
 
+def _rows_metrics(rows: dict[str, Any], regimes: list[str], *, n_points: int,
+                  n_samples: int) -> dict[str, Any]:
+    """Summary metrics of a file of rows (sweep points or set-points): largest amplitude,
+    peak force and coupling, mean contact fraction and dissipation, most common regime."""
+    return {
+        "n_points": n_points, "n_samples": n_samples,
+        "amplitude_m": float(np.max(rows["amplitude_m"])),
+        "contact_fraction": float(np.mean(rows["contact_fraction"])),
+        "dissipated_energy_j": float(np.mean(rows["dissipated_energy_j"])),
+        "peak_force_n": float(np.max(rows["peak_force_n"])),
+        "coupling_strength": float(np.max(rows["coupling_strength"])),
+        "regime": collections.Counter(regimes).most_common(1)[0][0],
+    }
+
+
 def _write_sweep(cfg: DictConfig, obj: dict[str, Any], path: Path,
                  free: SimulationResult | None, bar: Any) -> dict[str, Any]:
     """Stream the sweep: each point goes through the sensor and into its row on disk."""
@@ -679,15 +694,7 @@ def _write_sweep(cfg: DictConfig, obj: dict[str, Any], path: Path,
                                  modal_m=point.q * ell, scalars=lab, drive_phase_rad=phase)
             else:
                 writer.write_row(point.row, y, drive_phase_rad=phase)
-    return {
-        "n_points": n_rows, "n_samples": n,
-        "amplitude_m": float(np.max(rows["amplitude_m"])),
-        "contact_fraction": float(np.mean(rows["contact_fraction"])),
-        "dissipated_energy_j": float(np.mean(rows["dissipated_energy_j"])),
-        "peak_force_n": float(np.max(rows["peak_force_n"])),
-        "coupling_strength": float(np.max(rows["coupling_strength"])),
-        "regime": collections.Counter(regimes).most_common(1)[0][0],
-    }
+    return _rows_metrics(rows, regimes, n_points=n_rows, n_samples=n)
 
 
 def _write_series(cfg: DictConfig, obj: dict[str, Any], path: Path, result: SimulationResult,
@@ -716,15 +723,7 @@ def _write_series(cfg: DictConfig, obj: dict[str, Any], path: Path, result: Simu
         drive_phase_rad=si["drive_phase_rad"], free_deflection_m=free_m, labels=labels,
         **_calibration(cfg, obj))
     write_trace(trace, path)
-    return {
-        "n_points": trace.n_points, "n_samples": trace.n_samples,
-        "amplitude_m": float(np.max(rows["amplitude_m"])),
-        "contact_fraction": float(np.mean(rows["contact_fraction"])),
-        "dissipated_energy_j": float(np.mean(rows["dissipated_energy_j"])),
-        "peak_force_n": float(np.max(rows["peak_force_n"])),
-        "coupling_strength": float(np.max(rows["coupling_strength"])),
-        "regime": collections.Counter(regimes).most_common(1)[0][0],
-    }
+    return _rows_metrics(rows, regimes, n_points=trace.n_points, n_samples=trace.n_samples)
 
 
 def _update_manifest(folder: Path) -> Path:
