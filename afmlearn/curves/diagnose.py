@@ -24,7 +24,7 @@ from simulator.lockin import LockIn
 
 from .curve import Curve
 from .dissipation import dissipated_energy
-from .fit import CurveFitter
+from .fit import CurveFitter, wrap_phase
 from .hypotheses import EXTENSIONS, Hypothesis
 from .law import CurveLaw
 
@@ -211,7 +211,7 @@ def heldout_nrmse(fit: CurveFitter, curve: Curve, mask: np.ndarray) -> float:
     if not np.any(mask):
         return float("nan")
     a, p = fit.predict(curve)
-    dp = (p - curve.phase + np.pi) % (2 * np.pi) - np.pi
+    dp = wrap_phase(p - curve.phase)
     return 0.5 * (nrmse(a[mask], curve.amplitude[mask], scale=1.0)
                   + nrmse(curve.phase[mask] + dp[mask], curve.phase[mask], scale=np.pi / 2))
 

@@ -17,7 +17,7 @@ from .hypotheses import BASELINE, DRIFT, Hypothesis, Parameter
 from .law import CurveLaw
 from .model import SlowFlowModel
 
-__all__ = ["CurveFitter", "OFFSET"]
+__all__ = ["CurveFitter", "OFFSET", "wrap_phase"]
 
 log = logging.getLogger(__name__)
 
@@ -140,7 +140,7 @@ class CurveFitter:
         """Weighted sum of squares of the fitted model on the points ``mask``."""
         a, p = self.predict(curve)
         ra = (a - curve.amplitude)[mask] / self.sigma_[0]
-        rp = _wrap(p - curve.phase)[mask] / self.sigma_[1]
+        rp = wrap_phase(p - curve.phase)[mask] / self.sigma_[1]
         return float(ra @ ra + rp @ rp)
 
     # ------------------------------------------------------------------ internals
@@ -165,7 +165,7 @@ class CurveFitter:
         v = self._values(x)
         a, p = self._model(v).predict(self._law(v), c.tau, self.gap(c, v))
         ra = (a - c.amplitude)[m] / self.sigma_[0]
-        rp = _wrap(p - c.phase)[m] / self.sigma_[1]
+        rp = wrap_phase(p - c.phase)[m] / self.sigma_[1]
         out = np.concatenate([ra, rp])
         return np.where(np.isfinite(out), out, 1e6)
 
@@ -219,5 +219,6 @@ def _dec(p: Parameter, x: float) -> float:
     return 10.0 ** float(x) if p.log else float(x)
 
 
-def _wrap(d: NDArray[np.float64]) -> NDArray[np.float64]:
+def wrap_phase(d: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Phase differences [rad] wrapped to ``[-pi, pi)``, same shape as ``d``."""
     return (d + np.pi) % (2.0 * np.pi) - np.pi
