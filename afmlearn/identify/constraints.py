@@ -80,6 +80,22 @@ class CalibrationConstraints:
             return {"free_deflection": 0.01, "free_amplitude": 0.03}.get(drive_source)
         return getattr(self, f"{which}_uncertainty")
 
+    def lever_boxes(self, p: int, *, quality_factor: float, drive_amplitude: float | None,
+                    drive_index: int = 2) -> tuple[FloatArray, FloatArray]:
+        """Lower and upper bounds, shape (p,), boxing the lever's coefficients about the
+        calibration: ``xi_0 = -D`` about ``-1/Q``, ``xi_1 = -K`` about -1 and, unless
+        ``drive_amplitude`` is None, the in-phase drive ``xi_drive_index = B`` about ``F_c``;
+        every other coefficient is unbounded."""
+        lo, hi = np.full(p, -np.inf), np.full(p, np.inf)
+        d0 = 1.0 / quality_factor
+        tk, td, tb = self.box("stiffness"), self.box("damping"), self.box("drive")
+        lo[0], hi[0] = -d0 * (1 + td), -d0 * (1 - td)
+        lo[1], hi[1] = -(1 + tk), -(1 - tk)
+        if drive_amplitude is not None:
+            fc = drive_amplitude
+            lo[drive_index], hi[drive_index] = fc * (1 - tb), fc * (1 + tb)
+        return lo, hi
+
     def prior_gram(self, p: int, *, quality_factor: float, drive_amplitude: float | None,
                    drive_source: str, noise_variance: float,
                    drive_index: int = 2) -> tuple[FloatArray, FloatArray]:

@@ -595,18 +595,14 @@ class ForceIdentifier:
         theta = np.concatenate([lin, -fcol], axis=1)
         p = theta.shape[1]
         cal, cons = self._cal, self._cons
-        q, fc = cal.quality_factor, cal.drive_amplitude
-        d0 = 1.0 / q
-        lo = np.full(p, -np.inf)
-        hi = np.full(p, np.inf)
-        tk, td, tb = cons.box("stiffness"), cons.box("damping"), cons.box("drive")
-        lo[0], hi[0] = -d0 * (1 + td), -d0 * (1 - td)
-        lo[1], hi[1] = -(1 + tk), -(1 - tk)
-        if fc is not None:
-            if self._drive_rotated:
-                lo[2], hi[2] = fc * (1 - tb), fc * (1 + tb)
-                lo[3], hi[3] = -fc * tb, fc * tb
-            # unrotated (first pass): the drive is free, so the data set its phase
+        fc = cal.drive_amplitude
+        # unrotated (first pass): the drive is free, so the data set its phase
+        rotated = fc is not None and self._drive_rotated
+        lo, hi = cons.lever_boxes(p, quality_factor=cal.quality_factor,
+                                  drive_amplitude=fc if rotated else None)
+        if rotated:
+            tb = cons.box("drive")
+            lo[3], hi[3] = -fc * tb, fc * tb
         if self.physical_signs:
             sg = np.array([t.sign for t in library.terms], int)
             lo[_N_LIN:][sg > 0] = 0.0

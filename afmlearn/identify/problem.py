@@ -346,15 +346,14 @@ class JointProblem:
         theta = np.concatenate([lin, -self.force_columns(library, a0)], axis=1)
         n_lin, p = self.n_lin, theta.shape[1]
         cons = self.constraints
-        lo, hi = np.full(p, -np.inf), np.full(p, np.inf)
-        d0 = 1.0 / self.quality_factor
-        tk, td, tb = cons.box("stiffness"), cons.box("damping"), cons.box("drive")
-        lo[0], hi[0] = -d0 * (1 + td), -d0 * (1 - td)
-        lo[1], hi[1] = -(1 + tk), -(1 - tk)
         fc = self.drive_amplitude
         rot = self.rotated
-        if rot.any() and fc is not None:
-            lo[N_LEVER], hi[N_LEVER] = fc * (1 - tb), fc * (1 + tb)
+        drive_boxed = bool(rot.any()) and fc is not None
+        lo, hi = cons.lever_boxes(p, quality_factor=self.quality_factor,
+                                  drive_amplitude=fc if drive_boxed else None,
+                                  drive_index=N_LEVER)
+        if drive_boxed:
+            tb = cons.box("drive")
             for k, i in enumerate(np.flatnonzero(rot)):
                 # quadrature B sin(dphi): the drive box, or 3 prior widths of a recorded phase
                 w = float(self.phase_widths[i])

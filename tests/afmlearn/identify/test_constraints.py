@@ -28,3 +28,18 @@ def test_prior_gram_is_a_gaussian_about_the_calibration(source, drive_rel):
     G1, _ = cons.prior_gram(p, quality_factor=q, drive_amplitude=None, drive_source=source,
                             noise_variance=s2)
     assert G1[2, 2] == 0 and G1[0, 0] == G0[0, 0]
+
+
+def test_lever_boxes_hold_the_calibration_within_the_tolerances():
+    """-1/Q, -1 and F_c inside their boxes of the stated relative half-widths; the rest free."""
+    cons = CalibrationConstraints(tolerance=0.15, stiffness_tolerance=0.05)
+    q, fc, p = 200.0, 0.03, 7
+    lo, hi = cons.lever_boxes(p, quality_factor=q, drive_amplitude=fc, drive_index=3)
+    mu = np.array([-1.0 / q, -1.0, np.nan, fc])
+    for k, tol in ((0, 0.15), (1, 0.05), (3, 0.15)):
+        assert lo[k] < mu[k] < hi[k]
+        np.testing.assert_allclose((hi[k] - lo[k]) / 2, tol * abs(mu[k]), rtol=1e-12)
+    free = [2, 4, 5, 6]
+    assert np.all(np.isneginf(lo[free])) and np.all(np.isposinf(hi[free]))
+    lo2, hi2 = cons.lever_boxes(p, quality_factor=q, drive_amplitude=None, drive_index=3)
+    assert np.isneginf(lo2[3]) and np.isposinf(hi2[3]) and lo2[1] == lo[1]
