@@ -72,6 +72,9 @@ FloatArray = NDArray[np.float64]
 #: family-wise false-cause rate held by the thresholds (Bonferroni over the causes)
 FAMILY_ALPHA = 0.05
 
+#: held-out NRMSE above which the final model is reported as not explaining the data
+MISFIT_NRMSE = 0.05
+
 
 @final
 @dataclass(frozen=True)
@@ -727,6 +730,15 @@ class Diagnoser:
         self.extended_nrmse_ = _mean(final.nrmse)
         self.gain_ = (1.0 - self.extended_nrmse_ / self.baseline_nrmse_
                       if named and self.baseline_nrmse_ > 0 else 0.0)
+        if self.extended_nrmse_ > MISFIT_NRMSE:
+            # a model that explains the data predicts held-out spans at 0.001-0.01 (noise and
+            # denoising); far above that, what was named is not the whole story
+            self.confidence_ *= MISFIT_NRMSE / self.extended_nrmse_
+            self.warnings_.append(
+                f"the final model predicts the held-out data with NRMSE "
+                f"{self.extended_nrmse_:.3g} (above {MISFIT_NRMSE}): something none of the "
+                f"tested causes describes, or fits that did not converge; the confidence is "
+                f"scaled by {MISFIT_NRMSE}/NRMSE")
         ext_key = final.key if named else "none"
         self.spectral_error_ = {
             "baseline": self._spectral_error(r.heldout.simulated["none"], r.heldout),
