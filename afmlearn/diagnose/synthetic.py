@@ -647,7 +647,9 @@ def hidden_series(rng: np.random.Generator, path: str | os.PathLike[str], *,
         case = draw_series_case(rng, causes=causes, n_points=n_points)
         try:
             simulate_series(case, path, min_tapping=max((n_points + 1) // 2, 1), **kwargs)
-        except _NotTapping:
+        except (_NotTapping, FloatingPointError):
+            # FloatingPointError: the integration diverged (the tip crossed z = 0 where the
+            # drawn law has no repulsion): no recording, draw again
             continue
         return case
     raise RuntimeError(f"no tapping series in {max_draws} draws (causes {causes!r})")
