@@ -101,7 +101,9 @@ def _mean_loss(module, loader) -> float:
     return sum(values) / len(values)
 
 
-def test_one_epoch_fit_lowers_the_loss(compose_train, tmp_path):
+def test_a_short_fit_lowers_the_loss(compose_train, tmp_path):
+    """Five epochs on the tiny set (series, sweeps and the sensor chain since issue 15: one
+    epoch of batch 4 measured only a 19 % drop) lower the training loss by > 30 %."""
     from hydra.utils import instantiate
 
     cfg = compose_train(tmp_path, "data.batch_size=4")
@@ -112,7 +114,7 @@ def test_one_epoch_fit_lowers_the_loss(compose_train, tmp_path):
     module = OrbitModule(QRNNNet(dm.n_features, 16), horizon=cfg.data.horizon,
                          optimizer=lambda params: torch.optim.Adam(params, lr=1e-2))
     before = _mean_loss(module, dm.train_dataloader())
-    trainer = pl.Trainer(max_epochs=1, accelerator="cpu", logger=False,
+    trainer = pl.Trainer(max_epochs=5, accelerator="cpu", logger=False,
                          enable_checkpointing=False, enable_progress_bar=False,
                          enable_model_summary=False, deterministic=True)
     trainer.fit(module, train_dataloaders=dm.train_dataloader())
