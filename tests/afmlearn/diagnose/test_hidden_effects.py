@@ -172,9 +172,9 @@ def test_hidden_series_fast(tmp_path, causes):
 
 #: measured share of effect series (single causes and pairs) named exactly right, with a
 #: positive gain, at 200 samples per period, 1 % noise, 8 set-points of 30 periods with the
-#: drive phase (docs/benchmarks.md, section diagnose_series: 9 of 23 draws); the slow test
+#: drive phase (docs/benchmarks.md, section diagnose_series: 9 of 24 draws); the slow test
 #: below checks that a fresh set of draws is not significantly worse
-SERIES_RATE = 9 / 23
+SERIES_RATE = 9 / 24
 
 
 @pytest.mark.slow
