@@ -207,7 +207,7 @@ def test_two_effects_are_named_step_by_step(make_series):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="measured: this draw (8 x 100 periods, 1,000 "
+@pytest.mark.xfail(strict=True, reason="measured: this draw (8 x 100 periods, 1,000 "
                    "samples/period, 0.5 % noise) is named none; another draw of the same "
                    "setting was named with gain 0.79 and exponent 2.15 (truth 2.17); at 8 x 40 "
                    "periods, 200 samples/period, 1 % noise the chi2 drop was 6.3 < 7.2")
