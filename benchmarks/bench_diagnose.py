@@ -75,25 +75,29 @@ def _key(r: dict) -> tuple:
             r["periods"])
 
 
-def run_jobs(jobs: list[dict], records: Path, workers: int) -> list[dict]:
-    """Run missing jobs (resumable) and return every record of ``jobs``."""
+def run_jobs(jobs: list[dict], records: Path, workers: int, *, job=None, key=None,
+             desc: str = "diagnose") -> list[dict]:
+    """Run the missing ``jobs`` (resumable: one JSON line each as it finishes, in ``records``)
+    and return the record of every job that has one. ``job``/``key``: the worker function
+    and the record key (default: one-record diagnoses)."""
+    job, key = job or _job, key or _key
     records.parent.mkdir(parents=True, exist_ok=True)
     done = {}
     if records.exists():
         for line in records.read_text().splitlines():
             if line.strip():
                 r = json.loads(line)
-                done[_key(r)] = r
-    todo = [j for j in jobs if _key(j) not in done]
+                done[key(r)] = r
+    todo = [j for j in jobs if key(j) not in done]
     if todo:
         ctx = mp.get_context("spawn")
         with ctx.Pool(workers) as pool, open(records, "a") as f:
-            for r in tqdm(pool.imap_unordered(_job, todo), total=len(todo),
-                          desc="diagnose", disable=None):
+            for r in tqdm(pool.imap_unordered(job, todo), total=len(todo), desc=desc,
+                          disable=None):
                 f.write(json.dumps(r) + "\n")
                 f.flush()
-                done[_key(r)] = r
-    return [done[_key(j)] for j in jobs]
+                done[key(r)] = r
+    return [done[key(j)] for j in jobs if key(j) in done]
 
 
 def calibrate(null_records: list[dict], family_rate: float) -> NullCalibration:
@@ -248,23 +252,8 @@ def _series_key(r: dict) -> tuple:
 
 def run_series_jobs(jobs: list[dict], records: Path, workers: int) -> list[dict]:
     """Run missing variant jobs (resumable, one JSON line each as it finishes)."""
-    records.parent.mkdir(parents=True, exist_ok=True)
-    done = {}
-    if records.exists():
-        for line in records.read_text().splitlines():
-            if line.strip():
-                r = json.loads(line)
-                done[_series_key(r)] = r
-    todo = [j for j in jobs if _series_key(j) not in done]
-    if todo:
-        ctx = mp.get_context("spawn")
-        with ctx.Pool(workers) as pool, open(records, "a") as f:
-            for r in tqdm(pool.imap(_series_job, todo), total=len(todo),
-                          desc="diagnose series", disable=None):
-                f.write(json.dumps(r) + "\n")
-                f.flush()
-                done[_series_key(r)] = r
-    return [done[_series_key(j)] for j in jobs if _series_key(j) in done]
+    return run_jobs(jobs, records, workers, job=_series_job, key=_series_key,
+                    desc="diagnose series")
 
 
 def series_jobs(settings: list[tuple[int, float]], per_cause: int, pairs: int, periods: float,
