@@ -20,7 +20,8 @@ ATTR_OR_DATASET: Final = ("drive_frequency_hz", "gap_m")
 #: Optional entries that are an attribute (a number) or a dataset (one value per row).
 OPTIONAL_ATTR_OR_DATASET: Final = ("drive_phase_rad",)
 #: Optional entries that are datasets (``segment`` is int8; the lock-in curves are float64).
-OPTIONAL_DATASETS: Final = ("free_deflection_m", "segment", "amplitude_m", "phase_rad", "z_piezo_m")
+OPTIONAL_DATASETS: Final = ("free_deflection_m", "segment", "amplitude_m", "phase_rad", "z_piezo_m",
+                             "amplitude2_m", "phase2_rad")
 #: Datasets whose presence makes ``deflection_m`` optional (lock-in curves).
 LOCKIN_AMPLITUDE: Final = "amplitude_m"
 

@@ -95,6 +95,14 @@ class Trace:
         Piezo position [m] of each lock-in sample (larger = further from the sample).
     lockin_bandwidth_hz : float, optional
         Lock-in output bandwidth [Hz], > 0.
+    amplitude2_m : array-like, shape (n,), optional
+        Bimodal AM: amplitude [m], >= 0, of the second lock-in (at ``drive_frequency2_hz``,
+        usually the second flexural mode). Needs ``amplitude_m``.
+    phase2_rad : array-like, shape (n,), optional
+        Bimodal AM: phase [rad] of the second lock-in, same lag convention as ``phase_rad``
+        (pi/2 on that mode's free resonance). Needs ``amplitude2_m``.
+    drive_frequency2_hz : float, optional
+        Bimodal AM: the second drive frequency [Hz], > 0.
     labels : Labels, optional
         Ground truth of a simulated trace (needs ``deflection_m``).
     """
@@ -120,6 +128,9 @@ class Trace:
     phase_rad: FloatArray | None = None
     z_piezo_m: FloatArray | None = None
     lockin_bandwidth_hz: float | None = None
+    amplitude2_m: FloatArray | None = None
+    phase2_rad: FloatArray | None = None
+    drive_frequency2_hz: float | None = None
     labels: Labels | None = None
 
     def __post_init__(self) -> None:
@@ -299,6 +310,9 @@ def check_metadata(
     phase_rad: Any = None,
     z_piezo_m: Any = None,
     lockin_bandwidth_hz: Any = None,
+    amplitude2_m: Any = None,
+    phase2_rad: Any = None,
+    drive_frequency2_hz: Any = None,
 ) -> dict[str, Any]:
     """Validate the metadata of a trace with ``n_points`` rows (None: 1-D) of ``n_samples``.
 
@@ -349,7 +363,11 @@ def check_metadata(
         amplitude_m=amplitude_m,
         phase_rad=phase_rad,
         z_piezo_m=z_piezo_m,
+        amplitude2_m=amplitude2_m,
+        phase2_rad=phase2_rad,
     )
+    if drive_frequency2_hz is not None and lockin["amplitude2_m"] is None:
+        raise ValueError("drive_frequency2_hz needs amplitude2_m (a bimodal lock-in curve)")
     return {
         "sample_rate_hz": positive("sample_rate_hz", sample_rate_hz),
         "spring_constant_n_per_m": positive("spring_constant_n_per_m", spring_constant_n_per_m),
@@ -369,6 +387,7 @@ def check_metadata(
         "drive_phase_rad": phase,
         **lockin,
         "lockin_bandwidth_hz": optional_positive("lockin_bandwidth_hz", lockin_bandwidth_hz),
+        "drive_frequency2_hz": optional_positive("drive_frequency2_hz", drive_frequency2_hz),
     }
 
 
@@ -394,10 +413,12 @@ def _check_lockin(
     amplitude_m: Any,
     phase_rad: Any,
     z_piezo_m: Any,
+    amplitude2_m: Any = None,
+    phase2_rad: Any = None,
 ) -> dict[str, Any]:
     """Validate ``segment`` and the lock-in arrays: 1-D traces only, shape (n,) each."""
     given = {"segment": segment, "amplitude_m": amplitude_m, "phase_rad": phase_rad,
-             "z_piezo_m": z_piezo_m}
+             "z_piezo_m": z_piezo_m, "amplitude2_m": amplitude2_m, "phase2_rad": phase2_rad}
     out: dict[str, Any] = dict.fromkeys(given)
     for name, value in given.items():
         if value is None:
@@ -413,6 +434,11 @@ def _check_lockin(
             out[name] = finite_array(name, value, ndim=(1,), shape=(n_samples,))
     if out["phase_rad"] is not None and out["amplitude_m"] is None:
         raise ValueError("phase_rad needs amplitude_m (lock-in curves give both)")
-    if out["amplitude_m"] is not None and np.any(out["amplitude_m"] < 0):
-        raise ValueError(f"amplitude_m must be >= 0, found min {out['amplitude_m'].min()!r}")
+    if out["phase2_rad"] is not None and out["amplitude2_m"] is None:
+        raise ValueError("phase2_rad needs amplitude2_m (a bimodal lock-in gives both)")
+    if out["amplitude2_m"] is not None and out["amplitude_m"] is None:
+        raise ValueError("amplitude2_m needs amplitude_m (the second lock-in of a bimodal curve)")
+    for name in ("amplitude_m", "amplitude2_m"):
+        if out[name] is not None and np.any(out[name] < 0):
+            raise ValueError(f"{name} must be >= 0, found min {out[name].min()!r}")
     return out

@@ -2,7 +2,8 @@
 
 Channels are found by their dimension label (columns of the 2-D wave): ``Raw`` (Z piezo
 command), ``Defl`` (static deflection, m), ``Amp`` / ``Phase`` (first lock-in: m, degrees),
-``Amp2`` / ``Phas2`` (bimodal second lock-in), ``ZSnsr`` (Z sensor, m). Conventions mapped:
+``Amp2`` / ``Phas2`` (bimodal second lock-in: m or V, degrees), ``ZSnsr`` (Z sensor, m).
+Conventions mapped:
 
 - ``ZSnsr`` grows as the piezo extends towards the sample (it rises during the approach, the
   segment with ``Direction`` +1): ``z_piezo_m = -ZSnsr`` (larger = further from the sample).
@@ -19,10 +20,16 @@ command), ``Defl`` (static deflection, m), ``Amp`` / ``Phase`` (first lock-in: m
 - Wave note: ``SpringConstant`` [N/m], ``ThermalQ``, ``ThermalFrequency`` (f0 [Hz]),
   ``DriveFrequency`` [Hz], ``InvOLS`` / ``AmpInvOLS`` [m/V], ``NumPtsPerSec`` [Hz],
   ``ForceFilterBW`` [Hz] (output filter of the curve channels, taken as the lock-in bandwidth).
+- Bimodal (DualAC): ``Amp2`` / ``Phas2`` become ``amplitude2_m`` / ``phase2_rad`` with the
+  same conventions, at ``DriveFrequency1`` (``drive_frequency2_hz``); an ``Amp2`` stored in
+  volts is scaled by ``Amp2InvOLS`` (the second mode's own sensitivity, not ``AmpInvOLS``:
+  the optical lever sees each mode's slope). Without ``Amp2InvOLS`` a volt-valued ``Amp2``
+  cannot be put in metres: it is left out of the trace (kept in ``extra``) with a warning.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -35,6 +42,8 @@ from afmlearn.io.instruments.errors import RecordingError
 from afmlearn.io.instruments.units import check_length
 
 __all__ = ["AsylumReader", "parse_note"]
+
+logger = logging.getLogger(__name__)
 
 _NOTE_FIELDS = {  # wave-note key -> trace-format name
     "SpringConstant": "spring_constant_n_per_m",
@@ -82,15 +91,13 @@ class AsylumReader(InstrumentReader):
                                          "segment": _segments(note, data.shape[0], path)}
         check_length("z_piezo_m", arrays["z_piezo_m"], path)
         extra = {"note": note, "labels": labels}
-        for label, name in (("Amp2", "amplitude2_m"), ("Phas2", "phase2_rad")):
-            if label in columns:
-                extra[name] = columns[label] * (math.pi / 180 if label == "Phas2" else 1.0)
         if "Amp" in columns and "Phase" in columns:
             amp = columns["Amp"]
             if np.nanmax(np.abs(amp)) > 1e-4 and _number(note.get("AmpInvOLS")):
                 amp = amp * note["AmpInvOLS"]  # stored in volts: Amp x AmpInvOLS [m/V]
             check_length("Amp", amp, path)
             arrays.update(amplitude_m=amp, phase_rad=np.radians(columns["Phase"]))
+            _bimodal(columns, note, arrays, header, extra, path)
             return Parsed("lockin", arrays, header, extra)
         if "Defl" in columns:
             defl = columns["Defl"]
@@ -104,6 +111,32 @@ class AsylumReader(InstrumentReader):
             return Parsed("force_curve", arrays, header, extra)
         raise RecordingError(f"{path}: neither Amp/Phase (AC mode) nor Defl (force curve) "
                              f"columns; labels {labels}")
+
+
+def _bimodal(columns: Mapping[str, np.ndarray], note: Mapping[str, Any],
+             arrays: dict[str, np.ndarray], header: dict[str, Any], extra: dict[str, Any],
+             path: Path) -> None:
+    """Put the second lock-in (``Amp2`` [m or V], ``Phas2`` [deg]) into ``arrays`` in SI."""
+    if "Amp2" not in columns:
+        if "Phas2" in columns:
+            extra["phase2_rad"] = np.radians(columns["Phas2"])
+        return
+    amp2 = columns["Amp2"]
+    if np.nanmax(np.abs(amp2)) > 1e-4:  # no lever oscillates by 100 um: volts
+        if not _number(note.get("Amp2InvOLS")):
+            logger.warning("%s: Amp2 is in volts and the note has no Amp2InvOLS; the second "
+                           "lock-in is left out of the trace (extra['amplitude2_v'])", path)
+            extra["amplitude2_v"] = amp2
+            if "Phas2" in columns:
+                extra["phase2_rad"] = np.radians(columns["Phas2"])
+            return
+        amp2 = amp2 * note["Amp2InvOLS"]
+    check_length("Amp2", amp2, path)
+    arrays["amplitude2_m"] = amp2
+    if "Phas2" in columns:
+        arrays["phase2_rad"] = np.radians(columns["Phas2"])
+    if _number(note.get("DriveFrequency1")):
+        header["drive_frequency2_hz"] = note["DriveFrequency1"]
 
 
 def parse_note(note: bytes | str) -> dict[str, Any]:

@@ -18,6 +18,7 @@ CALIBRATION_FIELDS: tuple[str, ...] = (
     "sample_rate_hz", "spring_constant_n_per_m", "quality_factor", "resonance_frequency_hz",
     "drive_frequency_hz", "gap_m", "free_amplitude_m", "excitation", "dither_amplitude_m",
     "tip_radius_m", "lockin_bandwidth_hz", "drive_phase_rad", "description",
+    "drive_frequency2_hz",
 )
 
 

@@ -34,8 +34,9 @@ from afmlearn.io.instruments.units import SCALE, check_length, split_unit
 __all__ = ["CsvReader", "Hdf5SeriesReader", "NpzReader", "is_convention_csv"]
 
 _QUANTITIES = {"time": "time_s", "deflection": "deflection_m", "amplitude": "amplitude_m",
-               "phase": "phase_rad", "z_piezo": "z_piezo_m", "gap": "gap_m", "force": "force_n"}
-_LENGTHS = ("deflection_m", "amplitude_m", "z_piezo_m", "gap_m")
+               "phase": "phase_rad", "z_piezo": "z_piezo_m", "gap": "gap_m", "force": "force_n",
+               "amplitude2": "amplitude2_m", "phase2": "phase2_rad"}
+_LENGTHS = ("deflection_m", "amplitude_m", "z_piezo_m", "gap_m", "amplitude2_m")
 _HEADER_NUMBERS = tuple(f for f in CALIBRATION_FIELDS if f not in ("excitation", "description"))
 
 

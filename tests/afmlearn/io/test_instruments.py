@@ -54,6 +54,47 @@ def test_asylum_ac_curve_calibration_segments_and_signs():
     assert np.min(t.gap_m) == 0.0 and "offset is unknown" in t.description
 
 
+def _fake_dual_ac_wave(amp2: np.ndarray, note: str) -> dict:
+    """A DualAC wave as igor2 returns it: columns Raw, Amp, Phase, Amp2, Phas2, ZSnsr."""
+    n = amp2.size
+    z = np.linspace(0.0, 200e-9, n)
+    data = np.column_stack([z, np.full(n, 0.3), np.full(n, 90.0), amp2,
+                            np.linspace(80.0, 100.0, n), z])
+    labels = [b"", b"Raw", b"Amp", b"Phase", b"Amp2", b"Phas2", b"ZSnsr"]
+    return {"wave": {"wData": data, "labels": [[], labels],
+                     "note": note.encode(), "wave_header": {"sfA": [5e-4]}}}
+
+
+@pytest.mark.parametrize(("amp2_v", "inv2", "expect_m"), [
+    (0.05, "Amp2InvOLS: 2e-08\r", 1e-9),   # volts x the second mode's own sensitivity
+    (2e-9, "", 2e-9),                       # already in metres
+    (0.05, "", None),                       # volts without Amp2InvOLS: left out, no guess
+])
+def test_asylum_bimodal_amp2_phas2_become_the_second_lockin(monkeypatch, tmp_path, amp2_v,
+                                                              inv2, expect_m):
+    import igor2.binarywave
+
+    note = ("SpringConstant: 2\rThermalQ: 200\rThermalFrequency: 70000\r"
+            "DriveFrequency: 70000\rDriveFrequency1: 440000\rNumPtsPerSec: 2000\r"
+            "AmpInvOLS: 1e-07\r" + inv2)
+    wave = _fake_dual_ac_wave(np.full(64, amp2_v), note)
+    monkeypatch.setattr(igor2.binarywave, "load", lambda _path: wave)
+    path = tmp_path / "dual.ibw"
+    path.write_bytes(b"stand-in: the loader is patched")
+    t = open_recording(path)
+    np.testing.assert_allclose(t.amplitude_m, 0.3 * 1e-7)
+    if expect_m is None:
+        assert t.amplitude2_m is None and t.phase2_rad is None and t.drive_frequency2_hz is None
+        return
+    np.testing.assert_allclose(t.amplitude2_m, expect_m)
+    np.testing.assert_allclose(t.phase2_rad, np.radians(np.linspace(80.0, 100.0, 64)))
+    assert t.drive_frequency2_hz == 440000.0
+    written = convert_recording(path, tmp_path / "dual.h5")
+    back = read_trace(written[0]["path"])
+    np.testing.assert_allclose(back.amplitude2_m, expect_m)
+    assert back.drive_frequency2_hz == 440000.0
+
+
 def test_asylum_off_surface_curve_stays_free():
     t = open_recording(OFF)
     assert t.amplitude_m.min() > 0.9 * t.amplitude_m.max()  # never touched the surface

@@ -76,6 +76,15 @@ def curves(calibration: dict[str, Any]) -> Trace:
     )
 
 
+@pytest.fixture
+def bimodal(curves: Trace) -> Trace:
+    """Bimodal lock-in curves: a second amplitude and phase at the second drive frequency."""
+    z = curves.z_piezo_m
+    assert z is not None
+    return Trace(None, **{**curves.metadata(), "amplitude2_m": 1e-9 * (1 + z / z.max()),
+                          "phase2_rad": np.linspace(1.5, 1.7, N), "drive_frequency2_hz": 1.9e6})
+
+
 def test_series_properties_and_rows(series: Trace) -> None:
     assert series.is_series and series.has_rows and not series.is_sweep
     assert series.n_points == N_POINTS
@@ -112,7 +121,7 @@ def test_sweep_row_keeps_a_scalar_phase(calibration: dict[str, Any]) -> None:
     assert sweep.row(2).drive_frequency_hz == 3e5 and sweep.row(2).drive_phase_rad == 0.5
 
 
-@pytest.mark.parametrize("fixture", ["series", "ramp", "curves"])
+@pytest.mark.parametrize("fixture", ["series", "ramp", "curves", "bimodal"])
 def test_round_trip(
     tmp_path: Path, fixture: str, request: pytest.FixtureRequest, assert_same: Any
 ) -> None:
@@ -125,6 +134,8 @@ def test_round_trip(
     assert_same(trace, back, labels=trace.labels is not None)
     if trace.segment is not None:
         assert back.segment is not None and back.segment.dtype == np.int8
+    for name in ("amplitude2_m", "phase2_rad", "drive_frequency2_hz"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(trace, name))
 
 
 def test_layout_of_the_new_fields(tmp_path: Path, series: Trace, ramp: Trace) -> None:
@@ -202,6 +213,12 @@ def test_series_validation(series: Trace, changes: dict[str, Any], match: str) -
         ({"phase_rad": np.zeros(N)}, "phase_rad needs amplitude_m"),
         ({"amplitude_m": np.ones(N), "z_piezo_m": np.ones(3)}, "z_piezo_m must have shape"),
         ({"lockin_bandwidth_hz": 0.0}, "lockin_bandwidth_hz must be a finite number > 0"),
+        ({"amplitude2_m": np.ones(N)}, "amplitude2_m needs amplitude_m"),
+        ({"amplitude_m": np.ones(N), "phase2_rad": np.ones(N)}, "phase2_rad needs amplitude2_m"),
+        ({"amplitude_m": np.ones(N), "amplitude2_m": -np.ones(N)}, "amplitude2_m must be >= 0"),
+        ({"amplitude_m": np.ones(N), "amplitude2_m": np.ones(3)}, "amplitude2_m must have shape"),
+        ({"amplitude_m": np.ones(N), "drive_frequency2_hz": 2e6},
+         "drive_frequency2_hz needs amplitude2_m"),
     ],
 )
 def test_ramp_and_curve_validation(ramp: Trace, changes: dict[str, Any], match: str) -> None:
