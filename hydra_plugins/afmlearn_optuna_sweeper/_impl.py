@@ -285,7 +285,7 @@ class OptunaSweeperImpl:
                   if loader.get_group_options(k.lstrip("+~").replace(".", "/"))]
         files = write_results(study, results_dir=self.results_dir, groups=groups)
         if self.figures:
-            from afmlearn.tune.figures import write_figures
+            from afmlearn.plots.tune import write_figures
 
             files.update(write_figures(study, os.path.join(self.results_dir, study.study_name,
                                                            "figures")))

@@ -58,7 +58,7 @@ def test_summary_counts_states() -> None:
 
 
 def test_figures_are_written(tmp_path: Path) -> None:
-    from afmlearn.tune.figures import write_figures
+    from afmlearn.plots.tune import write_figures
 
     files = write_figures(_study(), tmp_path)
     assert set(files) == {"history", "importances", "parallel"}

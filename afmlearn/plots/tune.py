@@ -1,7 +1,7 @@
 """Figures of a study: optimisation history, parameter importances, parallel coordinates.
 
-Drawn with :mod:`optuna.visualization.matplotlib` and written atomically as PNG. Imported only
-by the sweeper (the top layer), never by the analyses.
+Drawn with :mod:`optuna.visualization.matplotlib` and written atomically as PNG. Part of the
+plots layer: imported by the sweeper (the top layer), never by the analyses (afmlearn.tune).
 """
 
 from __future__ import annotations
