@@ -219,9 +219,9 @@ class OptunaSweeperImpl:
             cfg.seed = None
         return cfg
 
-    def _pruner(self) -> optuna.pruners.BasePruner | None:
-        if self.pruner is None:
-            return None
+    def _pruner(self) -> optuna.pruners.BasePruner:
+        if self.pruner is None:  # `hydra.sweeper.pruner=null`: no pruning
+            return optuna.pruners.NopPruner()
         pruner = self.pruner  # instantiated by Hydra
         if not isinstance(pruner, optuna.pruners.BasePruner):
             raise ValueError(f"hydra.sweeper.pruner: {type(pruner).__name__} is not an Optuna "

@@ -24,7 +24,7 @@ class OptunaSweeperConf:
         ``_target_`` node of an Optuna sampler (None: TPE); a ``seed`` makes the study
         reproducible (each trial's sampler is seeded from it, the worker and the trial count).
     pruner : node or None
-        ``_target_`` node of an Optuna pruner (None: Optuna's median pruner).
+        ``_target_`` node of an Optuna pruner (None: no pruning, Optuna's ``NopPruner``).
     direction : str or list of str
         ``minimize`` / ``maximize`` (a list: several objectives, no pruning).
     storage : str or None

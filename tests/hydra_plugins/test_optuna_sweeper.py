@@ -99,3 +99,16 @@ def test_bad_input_fails_before_any_trial(tmp_path: Path, run_toy, override: str
     assert lines[-1].startswith("error: ") and needle in lines[-1], done.stderr[-1000:]
     assert not (tmp_path / "multirun").exists()  # no job ran
 
+
+
+def test_pruner_null_switches_pruning_off(tmp_path: Path, run_toy) -> None:
+    # the same seeded sweep prunes under a median pruner and prunes nothing with pruner=null
+    def pruned(*overrides: str) -> int:
+        url = f"sqlite:///{tmp_path / (str(len(overrides)) + '.db')}"
+        done = run_toy(f"hydra.sweeper.storage={url}", "hydra.sweeper.n_trials=10", *overrides)
+        assert done.returncode == 0, done.stderr[-2000:]
+        return len(_study(url).get_trials(states=(TrialState.PRUNED,)))
+
+    assert pruned("hydra.sweeper.pruner=null") == 0
+    assert pruned("+hydra.sweeper.pruner._target_=optuna.pruners.MedianPruner",
+                  "+hydra.sweeper.pruner.n_startup_trials=2") > 0
