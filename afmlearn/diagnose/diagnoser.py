@@ -619,7 +619,7 @@ class Diagnoser:
         fit = _Fit(sol, starts[0], build, params, key, np.full(jb.n_obs, np.nan))
         d = float(current.sol.chi2 - sol.chi2)
         n_par = len(params) - 1 + (sol.spec.n_force - current.sol.spec.n_force)
-        thr = calib.threshold(h.cause)
+        thr = calib.threshold(h.cause) - 2.0 * h.prior_log_odds(_Probe(traces, jb, oe, fit, 8))
         rep = self._rep
         model = oe.model(rep, sol.spec, sol.coef, sol.phases[rep])
         before = oe.model(rep, current.sol.spec, current.sol.coef, current.sol.phases[rep])

@@ -109,6 +109,12 @@ class AbstractHypothesis(abc.ABC):
         """Parameter values at which the extension is the baseline."""
         return [p.grid[0] if p.nested is None else p.nested for p in params]
 
+    def prior_log_odds(self, probe: Probe) -> float:
+        """Log-odds for this cause from evidence outside the fit (e.g. a classifier on the
+        records), added to the decision: the cause's null threshold on the chi-square drop is
+        lowered by twice it (chi2 drop = 2 log likelihood ratio). Default 0 (none)."""
+        return 0.0
+
     def details(self, model: DiagnosisModel, probe: Probe) -> dict[str, Any]:
         """Further evidence of the fitted extension for the report (JSON-able values), with
         an optional ``"text"`` appended to the evidence line. Default: nothing."""
