@@ -17,6 +17,16 @@ sweep (``docs/figures/qrnn_hidden_units.png``) and an orbit-prediction example
     python benchmarks/bench_qrnn_accuracy.py [--epochs 8] [--threads 1] [--no-doc]
     python benchmarks/bench_qrnn_accuracy.py --quick      # tiny data, 1 epoch, prints only
     python benchmarks/bench_qrnn_accuracy.py --transfer afmlearn/qrnn/checkpoints/qrnn_default.ckpt
+    python benchmarks/bench_qrnn_accuracy.py --orbit [--only qrnn,lstm,gru]
+
+``--orbit`` (issue 15) trains the QRNN with the shipped recipe (``experiment=qrnn_default``: the
+issue-15 data, at most 12 epochs with early stopping, seed 0, 1 thread) and LSTM and GRU of the
+same size with the identical recipe (data, epochs, early stopping, read-out, heads, loss,
+optimiser), and reports forecast NRMSE per period and the valid prediction time on the held-out
+cantilevers (ID) and on the out-of-distribution set, next to the persistence forecast, in one
+table (section ``qrnn_orbit``). The QRNN's exported checkpoint is the shipped one (the recipe
+is deterministic). Resumable: a finished variant is cached, an interrupted one resumes from its
+``last.ckpt``.
 
 ``--transfer CKPT`` (issue 15) evaluates a calibrated checkpoint on the held-out cantilevers of
 its training families and on the out-of-distribution set ``conf/data/qrnn_ood.yaml`` (another
@@ -194,8 +204,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--diagnose-cases", type=int, default=0,
                     help="with --transfer: also score this many hidden-effect traces per cause "
                          "(higher_mode, none) of afmlearn.diagnose.synthetic")
+    ap.add_argument("--orbit", action="store_true",
+                    help="QRNN (shipped recipe) vs LSTM and GRU trained identically: forecast "
+                         "NRMSE and VPT in and out of distribution (section qrnn_orbit)")
     add_doc_flag(ap)
     args = ap.parse_args(argv)
+    if args.orbit:
+        import torch
+
+        torch.set_num_threads(args.threads)
+        orbit(args.out.with_name("bench_qrnn_orbit"), threads=args.threads,
+              only=[k for k in args.only.split(",") if k], write=not args.no_doc)
+        return 0
     if args.transfer is not None:
         import torch
 
@@ -295,6 +315,130 @@ Figures: {', '.join(f'`{Path(f).relative_to(ROOT)}`' for f in figs) or '(none in
     write_section("qrnn_accuracy", "QRNN: held-out orbit prediction and coupling flag", body,
                   info, write=not args.no_doc)
     return 0
+
+
+# ---------------------------------------------------------------------------- orbit (issue 15)
+#: (key, label, overrides on top of the shipped recipe): one network each, same size and budget
+ORBIT_VARIANTS: list[tuple[str, str, list[str]]] = [
+    ("qrnn", "QRNN (window 2 / 1, shipped)", []),
+    ("lstm", "LSTM", ["model=lstm", "~model.net.upper_window"]),
+    ("gru", "GRU", ["model=gru", "~model.net.upper_window"]),
+]
+
+
+def _orbit_metrics(checkpoint: Path) -> dict[str, dict[str, float]]:
+    """Forecast NRMSE per period and VPT of a checkpoint (and of persistence), ID and OOD."""
+    import numpy as np
+    from hydra.utils import instantiate
+
+    from afmlearn.qrnn.evaluate import nrmse_per_period, valid_prediction_time
+    from afmlearn.qrnn.infer import load_module
+
+    module, run, _ = load_module(checkpoint)
+    horizon = int(run["horizon"])
+    out: dict[str, dict[str, float]] = {}
+    for name, cfg_name, stages in (("ID", None, ["test"]),
+                                   ("OOD", "qrnn_ood", ["train", "val", "test"])):
+        cfg = run["config"]["data"] if cfg_name is None else _compose(
+            [f"data={cfg_name}", "data.progress=false"]).data
+        dm = instantiate(cfg, horizon=horizon)
+        dm.setup()
+        d = _collect_stages(module, dm, stages)
+        true = d["y"].astype(float)
+        for who, pred in (("model", d["pred"].astype(float)),
+                          ("persistence", np.tile(d["x0"].astype(float), (1, horizon)))):
+            e = nrmse_per_period(pred, true, horizon=horizon)
+            m = {f"nrmse_{k + 1}": float(e[:, k].mean()) for k in range(horizon)}
+            m["nrmse_mean"] = float(e.mean())
+            m["median_nrmse_1"] = float(np.median(e[:, 0]))
+            m["vpt"] = float(valid_prediction_time(e, threshold=0.1).mean())
+            m["vpt_005"] = float(valid_prediction_time(e, threshold=0.05).mean())
+            m["n_windows"] = float(e.shape[0])
+            out[f"{name} {who}"] = m
+    return out
+
+
+def orbit(out: Path, *, threads: int, only: list[str], write: bool) -> str:
+    """Section qrnn_orbit: QRNN vs LSTM vs GRU trained with the shipped recipe."""
+    common = ["experiment=qrnn_default", f"paths.log_dir={out}", "ckpt_path=last",
+              f"threads={threads}", "callbacks.progress_bar.refresh_rate=0",
+              "data.progress=false"]
+    results: dict[str, dict[str, Any]] = {}
+    for key, label, extra in ORBIT_VARIANTS:
+        if only and key not in only:
+            continue
+        print(f"=== {label}", flush=True)
+        r = _run_variant(key, extra, common, out)
+        if "orbit" not in r:
+            r["orbit"] = _orbit_metrics(out / key / "qrnn_default.ckpt")
+            (out / key / "bench.json").write_text(json.dumps(r, indent=2))
+        results[key] = r
+    if only:
+        return ""
+    import numpy as np
+
+    horizon = sum(1 for k in results["qrnn"]["orbit"]["ID model"] if k.startswith("nrmse_")
+                  and k[6:].isdigit())
+    rows = []
+    for key, label, _ in ORBIT_VARIANTS:
+        r = results[key]
+        m = r["metrics"]
+        for s in ("ID", "OOD"):
+            o = r["orbit"][f"{s} model"]
+            rows.append([label, s, f"{r['params']:,}", f"{r['train_time_s']:.0f}",
+                         f"{m['epochs_completed']:.0f}",
+                         *[f"{o[f'nrmse_{k + 1}']:.4f}" for k in range(horizon)],
+                         f"{o['nrmse_mean']:.4f}", f"{o['median_nrmse_1']:.4f}",
+                         f"{o['vpt']:.2f}", f"{o['vpt_005']:.2f}",
+                         f"{m.get('heldout/coupling_auc', float('nan')):.3f}" if s == "ID"
+                         else "-"])
+    for s in ("ID", "OOD"):
+        o = results["qrnn"]["orbit"][f"{s} persistence"]
+        rows.append(["persistence (input period repeats)", s, "0", "0", "-",
+                     *[f"{o[f'nrmse_{k + 1}']:.4f}" for k in range(horizon)],
+                     f"{o['nrmse_mean']:.4f}", f"{o['median_nrmse_1']:.4f}", f"{o['vpt']:.2f}",
+                     f"{o['vpt_005']:.2f}", "-"])
+    table = md_table(["model", "set", "params", "train time [s]", "epochs",
+                      *[f"NRMSE period {k + 1}" for k in range(horizon)], "mean NRMSE",
+                      "median NRMSE period 1", "VPT (0.1) [periods]", "VPT (0.05) [periods]",
+                      "coupling AUC (ID)"], rows)
+    verdict = []
+    for s in ("ID", "OOD"):
+        q = results["qrnn"]["orbit"][f"{s} model"]["nrmse_mean"]
+        base = {k: results[k]["orbit"][f"{s} model"]["nrmse_mean"] for k in ("lstm", "gru")}
+        best = min(base, key=base.get)
+        pers = results["qrnn"]["orbit"][f"{s} persistence"]["nrmse_mean"]
+        verdict.append(f"- {s}: QRNN mean NRMSE {q:.4f} vs the better baseline ({best.upper()}) "
+                       f"{base[best]:.4f} ({(q - base[best]) / base[best] * 100:+.1f} %), vs "
+                       f"persistence {pers:.4f} ({(q - pers) / pers * 100:+.1f} %): "
+                       f"{'at least as accurate' if q <= base[best] * 1.01 else 'LESS accurate'}"
+                       f" than LSTM/GRU{' (within 1 %)' if q > base[best] else ''}.")
+    n_id = int(results["qrnn"]["orbit"]["ID model"]["n_windows"])
+    n_ood = int(results["qrnn"]["orbit"]["OOD model"]["n_windows"])
+    body = f"""
+Command: `python benchmarks/bench_qrnn_accuracy.py --orbit` (resumable; run with `nice -n 10`).
+Every network is trained by the shipped recipe (`python scripts/train_qrnn.py
+experiment=qrnn_default`, seed 0): the issue-15 data (`conf/data/qrnn.yaml`), at most 12 epochs
+with early stopping (patience 4) on `val/loss`, the best epoch, 1 torch thread; 2 layers x 64
+units each, the same read-out (a correction to the repeated input period, starting at zero),
+coupling head, loss (per-window NRMSE of the forecast + coupling BCE) and optimiser (AdamW,
+lr 3e-3). The LSTM and GRU are `torch.nn.LSTM` / `torch.nn.GRU`. ID = the held-out test
+cantilevers ({n_id} windows); OOD = every window of `conf/data/qrnn_ood.yaml` ({n_ood}
+windows: a cantilever family and an excitation never trained on, other sampling, detector and
+noise). NRMSE = RMS error / (max - min) of the true period, averaged over windows (design.md
+section 4); VPT = periods until the NRMSE first exceeds 0.1 (design.md), capped at the horizon
+({horizon}); also at 0.05, which separates the models more. Train times are wall times on the
+shared machine (not a speed measurement: see `qrnn_speed`).
+
+{table}
+
+{chr(10).join(verdict)}
+"""
+    info = machine_info()
+    info["load average"] = " ".join(f"{v:.1f}" for v in np.round(__import__("os").getloadavg(),
+                                                                   1))
+    return write_section("qrnn_orbit", "QRNN vs LSTM vs GRU: orbit forecast, same recipe",
+                         body, info, write=write)
 
 
 # ---------------------------------------------------------------------------- transfer (issue 15)

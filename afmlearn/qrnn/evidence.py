@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from afmlearn.io import Experiment, Trace
-from afmlearn.qrnn.infer import DEFAULT_CHECKPOINT, load_module, predict_trace
+from afmlearn.qrnn.infer import DEFAULT_CHECKPOINT, calibration_of, load_module, predict_trace
 
 __all__ = ["CouplingEvidence", "coupling_probability"]
 
@@ -57,6 +57,11 @@ class CouplingEvidence:
         Whether the checkpoint carries a calibration.
     checkpoint : str
         The checkpoint used.
+    base_rate : ndarray, shape (n_obs,)
+        Share of coupled traces in the calibration set of each observation's kind (steady
+        records / sweep points): the prior the calibrated probability carries (NaN when
+        uncalibrated). ``logit(probability) - logit(base_rate)`` is the log likelihood ratio
+        of the network's evidence (:meth:`log_likelihood_ratio`).
     """
 
     probability: NDArray[np.float64]
@@ -69,6 +74,19 @@ class CouplingEvidence:
     false_flag_rate: float | None
     calibrated: bool
     checkpoint: str
+    base_rate: NDArray[np.float64]
+
+    def log_likelihood_ratio(self, *, eps: float = 1e-4) -> NDArray[np.float64]:
+        """``logit(p) - logit(base_rate)`` per observation (NaN when uncalibrated).
+
+        Bayes: the calibrated probability is the posterior under the calibration set's base
+        rate, so this difference is what the records add to any prior. ``p`` and the base rate
+        are clipped to ``[eps, 1 - eps]``.
+        """
+        def logit(v: NDArray[np.float64]) -> NDArray[np.float64]:
+            v = np.clip(v, eps, 1.0 - eps)
+            return np.log(v / (1.0 - v))
+        return logit(self.probability) - logit(self.base_rate)
 
     @property
     def max_probability(self) -> float:
@@ -83,7 +101,7 @@ class CouplingEvidence:
                 "drive_frequency_hz": self.drive_frequency_hz.tolist(),
                 "threshold": self.threshold, "false_flag_rate": self.false_flag_rate,
                 "calibrated": self.calibrated, "checkpoint": self.checkpoint,
-                "max_probability": self.max_probability}
+                "base_rate": self.base_rate.tolist(), "max_probability": self.max_probability}
 
 
 @lru_cache(maxsize=4)
@@ -136,10 +154,14 @@ def coupling_probability(recording: Trace | Experiment | str | os.PathLike[str],
                              "curves")
         summary = predict_trace(obs, module, run)["summary"]
         threshold = summary["threshold"]
+        cal = calibration_of(run, "sweep" if obs.is_sweep else "steady")
+        src = cal.source if cal is not None else {}
+        rate = (float(src["n_coupled"]) / float(src["n_traces"])
+                if src.get("n_traces") else float("nan"))
         gaps = np.broadcast_to(np.asarray(obs.gap_m, dtype=float), (obs.n_points,)
                                ) if obs.has_rows else np.array([float(obs.gap_m)])
         for t in summary["traces"]:
-            rows.append({**t, "gap_m": float(gaps[t["row"]])})
+            rows.append({**t, "gap_m": float(gaps[t["row"]]), "base_rate": rate})
     assert summary is not None  # an Experiment holds at least one observation
     prob = np.array([r["score"] for r in rows])
     return CouplingEvidence(
@@ -149,4 +171,5 @@ def coupling_probability(recording: Trace | Experiment | str | os.PathLike[str],
         gap_m=np.array([r["gap_m"] for r in rows]),
         drive_frequency_hz=np.array([r["drive_frequency_hz"] for r in rows]),
         threshold=float(threshold), false_flag_rate=summary["false_flag_rate"],
-        calibrated=bool(summary["calibrated"]), checkpoint=path)
+        calibrated=bool(summary["calibrated"]), checkpoint=path,
+        base_rate=np.array([r["base_rate"] for r in rows]))

@@ -3,8 +3,10 @@
 Both strategies share one read-out: at every sample ``t`` of the input period the features
 ``[h_t, h_T]`` (the hidden state at ``t`` and the last hidden state, which summarises the whole
 period) go through one linear layer. The output at ``t`` predicts the deflection at the same
-phase ``t`` of the following period(s), optionally as a correction to the periodic continuation
-``x(t + k P) ~ x(t)`` (``residual=True`` in :class:`afmlearn.qrnn.module.OrbitModule`).
+phase ``t`` of the following period(s), optionally as a correction to a ``base`` forecast made
+from the measured period alone: the periodic continuation ``x(t + k P) = x(t)`` or its
+per-harmonic filtered version (``residual`` and ``spectral_skip`` of
+:class:`afmlearn.qrnn.module.OrbitModule`).
 
 `DirectForecast`
     The read-out has ``horizon`` outputs per sample: all predicted periods come out at once from
@@ -35,6 +37,8 @@ __all__ = ["AbstractForecast", "DirectForecast", "AutoregressiveForecast"]
 
 #: ``step(x) -> (outputs (B, P, n_out), hidden (B, P, H))``: one pass of network + read-out
 Step = Callable[[Tensor], tuple[Tensor, Tensor]]
+#: ``base(u) -> (B, P, n_out)``: the skip forecast from the deflection ``u`` (B, P) of a period
+Base = Callable[[Tensor], Tensor]
 
 
 class AbstractForecast(abc.ABC):
@@ -46,7 +50,7 @@ class AbstractForecast(abc.ABC):
 
     @abc.abstractmethod
     def rollout(self, step: Step, x: Tensor, *, horizon: int, deflection_channel: int,
-                residual: bool) -> tuple[Tensor, Tensor]:
+                base: Base | None) -> tuple[Tensor, Tensor]:
         """Predict ``horizon`` periods after the input period.
 
         Parameters
@@ -60,8 +64,10 @@ class AbstractForecast(abc.ABC):
             Periods to predict (>= 1).
         deflection_channel : int
             Index of the deflection among the ``F`` input channels.
-        residual : bool
-            The read-out is a correction to the periodic continuation of the deflection.
+        base : callable or None
+            ``base(u)`` (``u``: the deflection channel of the period fed in, (B, P)) gives the
+            skip forecast ``(B, P, outputs_per_step(horizon))`` the read-out corrects; None:
+            the read-out is the forecast itself.
 
         Returns
         -------
@@ -83,10 +89,10 @@ class DirectForecast(AbstractForecast):
         return horizon
 
     def rollout(self, step: Step, x: Tensor, *, horizon: int, deflection_channel: int,
-                residual: bool) -> tuple[Tensor, Tensor]:
+                base: Base | None) -> tuple[Tensor, Tensor]:
         out, hidden = step(x)                                  # (B, P, horizon)
-        if residual:
-            out = out + x[:, :, deflection_channel : deflection_channel + 1]
+        if base is not None:
+            out = out + base(x[:, :, deflection_channel])
         # (B, P, horizon) -> (B, horizon, P) -> (B, horizon * P)
         return out.transpose(1, 2).reshape(x.shape[0], -1), hidden
 
@@ -99,7 +105,7 @@ class AutoregressiveForecast(AbstractForecast):
         return 1
 
     def rollout(self, step: Step, x: Tensor, *, horizon: int, deflection_channel: int,
-                residual: bool) -> tuple[Tensor, Tensor]:
+                base: Base | None) -> tuple[Tensor, Tensor]:
         periods = []
         hidden0 = None
         current = x
@@ -107,8 +113,8 @@ class AutoregressiveForecast(AbstractForecast):
             out, hidden = step(current)                        # (B, P, 1)
             if hidden0 is None:
                 hidden0 = hidden
-            if residual:
-                out = out + current[:, :, deflection_channel : deflection_channel + 1]
+            if base is not None:
+                out = out + base(current[:, :, deflection_channel])
             periods.append(out[..., 0])
             current = torch.cat([current[..., :deflection_channel], out,
                                  current[..., deflection_channel + 1:]], dim=-1)
