@@ -58,13 +58,29 @@ class SlowFlowModel:
         Largest phase turn / relative amplitude change per RK4 sub-step.
     settle : float
         Time integrated at the first gap before the first sample, in units of ``2Q``.
+    tolerance : float or None
+        Local error per step of the adaptive Dormand--Prince integration
+        (:func:`_kernel.integrate_adaptive`; absolute, on amplitude / free amplitude and lag
+        [rad]). None: the fixed-grid RK4 reference (:func:`_kernel.integrate`, sub-stepped by
+        ``max_turn``), several times slower on a long ramp.
+    max_step : float
+        Longest adaptive step (dimensionless time), in units of ``2Q`` (the lever's amplitude
+        time constant).
+
+    Attributes
+    ----------
+    n_steps_ : int
+        Integration steps of the last :meth:`predict` (adaptive only; 0 for the reference).
     """
 
     def __init__(self, *, quality_factor: float, omega: float, drive: float,
                  lockin: LockIn | None = None, step: float = 2.0 * math.pi,
-                 max_turn: float = 0.25, settle: float = 3.0) -> None:
+                 max_turn: float = 0.25, settle: float = 3.0,
+                 tolerance: float | None = 1e-7, max_step: float = 2.0) -> None:
         for name, v in (("quality_factor", quality_factor), ("omega", omega),
-                        ("drive", drive), ("step", step), ("max_turn", max_turn)):
+                        ("drive", drive), ("step", step), ("max_turn", max_turn),
+                        ("max_step", max_step), ("tolerance", 1.0 if tolerance is None
+                                                 else tolerance)):
             if not (math.isfinite(float(v)) and float(v) > 0.0):
                 raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
         self.quality_factor = float(quality_factor)
@@ -74,6 +90,9 @@ class SlowFlowModel:
         self.step = float(step)
         self.max_turn = float(max_turn)
         self.settle = float(settle)
+        self.tolerance = None if tolerance is None else float(tolerance)
+        self.max_step = float(max_step)
+        self.n_steps_ = 0
 
     @classmethod
     def for_curve(cls, curve: Curve, *, lockin: LockIn | None = None,
@@ -111,9 +130,15 @@ class SlowFlowModel:
         grid = tau[0] + h * np.arange(n)
         g = np.concatenate([np.full(n_settle, gap[0]), np.interp(grid, tau, gap)])
         a0, p0 = self.free_state()
-        amp, phi = _kernel.integrate(law.vector(), g, h, a0, p0, self.quality_factor,
-                                     self.omega, self.drive, _kernel._GL_X, _kernel._GL_W,
-                                     self.max_turn)
+        if self.tolerance is None:
+            amp, phi = _kernel.integrate(law.vector(), g, h, a0, p0, self.quality_factor,
+                                         self.omega, self.drive, _kernel._GL_X, _kernel._GL_W,
+                                         self.max_turn)
+        else:
+            amp, phi, self.n_steps_ = _kernel.integrate_adaptive(
+                law.vector(), g, h, a0, p0, self.quality_factor, self.omega, self.drive,
+                _kernel._GL_X, _kernel._GL_W, self.tolerance,
+                self.max_step * 2.0 * self.quality_factor)
         iq = np.stack([amp * np.cos(phi), amp * np.sin(phi)])
         if self.lockin is not None:
             iq = self.lockin.filter(iq, dt=h)
