@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from afmlearn.identify.constraints import CalibrationConstraints
 from afmlearn.identify.identifier import ForceIdentifier, force_vs_gap
 from afmlearn.identify.library import (
     AFMLibrary,
@@ -16,7 +17,10 @@ from afmlearn.identify.library import (
     IndentationRate,
     InversePower,
 )
+from afmlearn.identify.projection import HarmonicBalance
+from afmlearn.identify.single_problem import build_orbit_problem
 from afmlearn.io import read_trace
+from afmlearn.preprocess import calibrate
 
 SMALL = AFMLibrary([InversePower(2.0), InversePower(8.0), ContactIndicator(), Indentation(1.5),
                     Indentation(2.5), IndentationRate(0.5), ExponentialDamping(0.1)])
@@ -62,25 +66,14 @@ def test_harmonic_balance_rows_vanish_for_the_true_model(tmp_path, run_sim):
     metrics, _ = run_sim("force=dmt", "noise.level=0", "scenario.n_periods=40",
                          "scenario.samples_per_period=200", "scenario.settle_periods=3500")
     t = read_trace(metrics["output"], labels=True)
-    ide = ForceIdentifier(**FAST)
-    import afmlearn.identify.identifier as mod
-
-    class Stop(Exception):
-        pass
-
-    def stop(*a, **k):
-        raise Stop
-
-    orig = mod.ForceIdentifier._select
-    mod.ForceIdentifier._select = stop
-    try:
-        with pytest.raises(Stop):
-            ide.fit(t)
-    finally:
-        mod.ForceIdentifier._select = orig
+    problem = build_orbit_problem(
+        calibrate(t), constraints=CalibrationConstraints(), projection=None,
+        heldout_fraction=0.3, n_folds=6, max_harmonics=100, min_harmonics=30, thresholds=None,
+        nus=None, n_a0=6, a0_range_m=None, physical_signs=True)
+    assert problem.periodic and isinstance(problem.projection, HarmonicBalance)
     par = t.labels.model["force"]["parameters"]
     lib = AFMLibrary([InversePower(2.0), Indentation(1.5)])
-    des = ide._design(lib, par["a0"])
+    des = problem.design(lib, par["a0"])
     q = t.quality_factor
     # drive fitted freely, everything else true
     lin = des.theta[:, :4]
@@ -206,7 +199,7 @@ def test_exponent_interval_covers_the_true_exponent(dmt_fit):
 
 def test_profile_interval_of_a_parabola():
     """RSS = n0 (1 + (p - 2)^2 / n0 s^2): the 95 % interval is 2 +- 1.96 s (Wilks)."""
-    from afmlearn.identify.identifier import _profile_interval
+    from afmlearn.identify.selection import profile_interval as _profile_interval
 
     n, s = 10_000, 0.2
     p = np.linspace(0.5, 3.5, 3001)
