@@ -16,13 +16,21 @@ returns values; no stage keeps state. :func:`fit_joint` runs them in order:
    at its turning point, under its prior) for the chosen law, and the selection again;
 6. :class:`Refinement` - ``a0`` and exponents by Nelder--Mead, accepted on a paired CV gain;
 7. :class:`Bagging` - block bootstrap for coefficient bands;
-8. :class:`ExponentProfile` - the contact exponent's profile likelihood over the JOINT fit
-   (``a0`` and every coefficient re-fitted at each exponent), its 95 % interval and whether
-   the data bound it.
+8. with an :class:`~afmlearn.identify.output_error.OutputErrorStage`: the law's own
+   periodic orbits (one compiled kernel, Newton shooting) against every observation's
+   measured harmonics; the shared law, the drive phases and the support are refined on that
+   objective and the exponent's profile likelihood comes from it (the equation-error rows
+   evaluate the force on denoised orbits whose error near the turning point differs per
+   set-point, which biased the exponent); its Gauss--Newton covariance gives the bands.
+   Without it (or when its orbits are not found): :class:`Bagging` - block bootstrap for
+   coefficient bands, and :class:`ExponentProfile` - the contact exponent's profile likelihood
+   over the JOINT equation-error fit (``a0`` and every coefficient re-fitted at each
+   exponent), its 95 % interval and whether the data bound it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -33,7 +41,15 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize, minimize_scalar
 
 from .drive import AbstractDrivePhase, RecordedPhase
-from .library import AFMLibrary, ExponentialDamping, Indentation, IndentationRate
+from .library import (
+    AFMLibrary,
+    ContactIndicator,
+    ExponentialDamping,
+    Indentation,
+    IndentationRate,
+    InversePower,
+)
+from .output_error import OutputErrorResult, OutputErrorStage, covariance_samples
 from .problem import JointDesign, JointProblem
 from .selection import Candidate, best_by_ic, knee_one_se, profile_interval
 from .stepwise import ForwardSelection, cv_errors
@@ -43,6 +59,9 @@ __all__ = ["Bagging", "ContactOnsetProfile", "ExponentProfile", "JointResult", "
            "fit_offsets", "block_mean_rss", "support_fit"]
 
 FloatArray = NDArray[np.float64]
+
+#: the output-error stage :func:`fit_joint` runs unless told otherwise
+DEFAULT_OUTPUT_ERROR = OutputErrorStage()
 
 
 # ---------------------------------------------------------------------------- shared pieces
@@ -536,6 +555,9 @@ class JointResult:
         :class:`ExponentProfile` output.
     refined : bool
     phase_info : dict
+    output_error : OutputErrorResult or None
+        The output-error stage's solution (its law is ``library``, ``a0``, ``coef``), None
+        when the stage was off or its orbits were not found.
     """
 
     problem: JointProblem
@@ -553,6 +575,7 @@ class JointResult:
     exponent: dict[str, Any] | None
     refined: bool
     phase_info: dict[str, Any] = field(default_factory=dict)
+    output_error: OutputErrorResult | None = None
 
 
 def fit_joint(problem: JointProblem, library: AFMLibrary, *,
@@ -563,8 +586,14 @@ def fit_joint(problem: JointProblem, library: AFMLibrary, *,
               bagging: Bagging | None = None,
               exponent: ExponentProfile | None = None,
               offsets: OrbitOffsets | None = None,
+              output_error: OutputErrorStage | None = DEFAULT_OUTPUT_ERROR,
               log: Any = None) -> JointResult:
-    """Run the stages (module docstring) on ``problem`` with candidate terms ``library``."""
+    """Run the stages (module docstring) on ``problem`` with candidate terms ``library``.
+
+    ``output_error`` is on by default (None: the equation-error law, bootstrap bands and
+    :class:`ExponentProfile`); its exponent profile takes the range ``[low, high]`` of
+    ``exponent`` when that is given.
+    """
     def say(msg: str) -> None:
         if log is not None:
             log(msg)
@@ -599,17 +628,54 @@ def fit_joint(problem: JointProblem, library: AFMLibrary, *,
         if offsets is not None and refined:
             problem = offsets.run(problem, lib_s, a0_s)
     coef, _, des_f = support_fit(problem, lib_s, a0_s)
-    samples = (bagging or Bagging(n_bootstrap=0)).run(problem, des_f)
     expo = None
     dominant = _dominant_exponent(problem, lib_s, a0_s, coef)
-    if exponent is not None and dominant is not None:
-        say("exponent profile")
-        expo = exponent.run(problem, lib_s, a0_s, dominant)
+    oe = None
+    if output_error is not None and lib_s.n_terms:
+        say("output error: the law's own orbits against every observation")
+        if exponent is not None and output_error.profile is not None:
+            output_error = dataclasses.replace(output_error, profile=dataclasses.replace(
+                output_error.profile, low=exponent.low, high=exponent.high))
+        oe, expo = output_error.run(problem, lib_s, a0_s, coef, dominant,
+                                    [*_contact_pair(library),
+                                     *_later_terms(cands, ki, des.library, n_lin)])
+        if oe is None:
+            say("output error: an orbit of the equation-error law was not found; kept it")
+    if oe is not None:
+        lib_s, a0_s, coef = oe.library, oe.a0, oe.coef(problem)
+        bag = bagging or Bagging(n_bootstrap=0)
+        samples = covariance_samples(oe, problem, bag.n_bootstrap, bag.seed)
+    else:
+        samples = (bagging or Bagging(n_bootstrap=0)).run(problem, des_f)
+        if exponent is not None and dominant is not None:
+            say("exponent profile")
+            expo = exponent.run(problem, lib_s, a0_s, dominant)
     return JointResult(problem=problem, library=lib_s, a0=a0_s, coef=coef, samples=samples,
                        candidates=cands, knee_index=ki, ic_index=ii,
                        ic_coef=np.asarray(cands[ii].coef[0]), selection_library=des.library,
                        selection_a0=des.a0, a0_profile=a0_prof, exponent=expo,
-                       refined=refined, phase_info=phase_info)
+                       refined=refined, phase_info=phase_info, output_error=oe)
+
+
+def _contact_pair(library: AFMLibrary) -> list[tuple[Any, ...]]:
+    """The sphere's van der Waals pair ``z^-2 [z>a0]`` + ``[z<=a0]`` of ``library`` (the
+    physics.md baseline's attraction), as one candidate; empty when either is absent."""
+    vdw = [t for t in library.terms if isinstance(t, InversePower) and t.n == 2.0]
+    ind = [t for t in library.terms if isinstance(t, ContactIndicator)]
+    return [(vdw[0], ind[0])] if vdw and ind else []
+
+
+def _later_terms(cands: list[Candidate], knee: int, library: AFMLibrary, n_lin: int
+                 ) -> list[Any]:
+    """Force terms of the forward path's supports beyond the knee, in order of entry."""
+    seen = cands[knee].coef[0][n_lin:] != 0
+    out = []
+    for c in cands[knee + 1:]:
+        new = (c.coef[0][n_lin:] != 0) & ~seen
+        for j in np.flatnonzero(new):
+            out.append(library.terms[int(j)])
+        seen |= new
+    return out
 
 
 def _dominant_exponent(problem: JointProblem, lib: AFMLibrary, a0: float, coef: FloatArray

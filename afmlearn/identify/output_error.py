@@ -1,0 +1,780 @@
+"""Output-error stage of the joint fit: the law's own orbits against the measured deflection.
+
+The harmonic-balance rows (:mod:`afmlearn.identify.problem`) evaluate the force terms on each
+observation's *denoised* orbit. Near the turning point that orbit is known only to the noise
+and truncation of its Fourier series, differently in every set-point, and a contact force is
+so steep there that the rows of different set-points disagree about one law: the joint
+equation-error fit then trades damping, drive and an ``x^3`` term against the contact law
+(measured: ``p`` 2.25 for true 1.5, 2.0 and 2.27 alike). This stage removes the approximation.
+For a parameter vector (``K``, ``D``, ``B``, ``a0``, the dominant contact exponent, the force
+coefficients of the chosen support) every observation's periodic orbit is found by Newton
+shooting on the one-period map of the ONE compiled kernel
+(:func:`afmlearn.identify._simulate.simulate_period`, switches at ``a0`` located), and its
+harmonics are compared with the measured ones in units of their noise:
+
+    chi2 = sum_i sum_k |X_ik(theta) e^{-i k phi_i} - Y_ik|^2 / s_ik^2 + calibration priors
+
+``Y_ik`` are the measured harmonics of observation ``i`` (least squares over all its periods;
+``s_ik`` the noise of one real coefficient, ``sigma_i sqrt(2 / n_i)``, ``sigma_i sqrt(1 /
+n_i)`` for the mean), ``X_ik`` those of the model's phase-0 orbit at the observation's rest
+gap. The drive phase ``phi_i`` is projected out in closed form (:func:`align_phase`: the steady
+orbit of ``B cos(Omega tau - phi)`` is the phase-0 orbit delayed by ``phi / Omega``), under
+the recorded phase's prior where there is one. ``chi2`` is ``-2 log`` likelihood of "measured
+= model orbit + white noise", so the exponent's profile over it (:class:`OutputErrorProfile`,
+everything else re-optimised at each exponent) is the profile likelihood the interval and the
+``bounded`` flag come from. When the law cannot fit every orbit to the noise, ``chi2 / dof``
+exceeds 1 and the profile's threshold is scaled by it (quasi-likelihood), so a misfit widens
+the interval instead of making a wrong law look certain.
+
+The rest gaps are taken as recorded (the simulated orbit needs no gap offset: the offsets of
+the equation-error stage corrected the denoised orbit's error, which does not arise here).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, final
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from afmlearn.preprocess import fit_harmonics
+
+from ._simulate import simulate_period
+from .library import AFMLibrary, Indentation
+from .problem import N_LEVER, JointProblem
+
+__all__ = ["MeasuredHarmonics", "OutputErrorFit", "OutputErrorLaw", "OutputErrorProfile",
+           "OutputErrorResult", "OutputErrorStage", "OutputErrorSupport", "align_phase",
+           "covariance_samples", "measured_harmonics", "periodic_orbit"]
+
+FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
+
+#: a residual returned for a parameter vector whose orbit cannot be found (a barrier)
+_FAIL = 1e4
+
+
+# ---------------------------------------------------------------------------- data
+@final
+@dataclass(frozen=True, eq=False)
+class MeasuredHarmonics:
+    """Measured harmonics of every observation (common units, lengths / ``L_ref``).
+
+    Attributes
+    ----------
+    Y : ndarray, shape (n_obs, n_h + 1), complex
+        ``Y_ik``: ``x_i(tau) = Re sum_k Y_ik e^{i k Omega tau}`` (tau from the record's first
+        sample).
+    sigma : ndarray, shape (n_obs, n_h + 1)
+        Noise standard deviation of the real and of the imaginary part of ``Y_ik`` (the mean,
+        ``k = 0``, has no imaginary part).
+    start : ndarray, shape (n_obs, 2)
+        ``(x, x')`` of the phase-0 orbit at ``tau = 0`` read from the measured orbit
+        (a shooting start; refined per observation as the fit proceeds).
+    """
+
+    Y: ComplexArray
+    sigma: FloatArray
+    start: FloatArray
+
+    @property
+    def n_harmonics(self) -> int:
+        return int(self.Y.shape[1] - 1)
+
+
+def measured_harmonics(problem: JointProblem, n_harmonics: int) -> MeasuredHarmonics:
+    """Harmonics 0..``n_harmonics`` of every observation and their noise (one pass each).
+
+    The start state of observation ``i`` is its measured orbit at ``tau = phi_i / Omega``
+    with ``phi_i`` its recorded (or, for a free drive, its fundamental's) phase.
+    """
+    Y, S, st = [], [], []
+    for i, o in enumerate(problem.observations):
+        spp = o.calibrated.samples_per_period
+        h = max(min(int(n_harmonics), int(spp / 2) - 1), 1)
+        hf = fit_harmonics(o.tau, o.x, o.omega, n_harmonics=h)
+        y = np.zeros(n_harmonics + 1, complex)
+        y[:h + 1] = hf.complex_amplitudes
+        n = o.x.size
+        s = np.full(n_harmonics + 1, hf.noise_rms * math.sqrt(2.0 / n))
+        s[0] = hf.noise_rms * math.sqrt(1.0 / n)
+        s[h + 1:] = np.inf  # not measured: no weight
+        Y.append(y)
+        S.append(np.maximum(s, 1e-300))
+        rot = problem.rotations[i]
+        phi = float(rot) if math.isfinite(rot) else -float(np.angle(y[1]))
+        t0 = np.array([phi / o.omega])
+        hs = o.harmonic_fit  # the noise-floor order: a smoother velocity than all harmonics
+        st.append((float(hs.evaluate(t0)[0]), float(hs.evaluate(t0, 1)[0])))
+    return MeasuredHarmonics(Y=np.array(Y), sigma=np.array(S), start=np.array(st))
+
+
+# ---------------------------------------------------------------------------- orbit
+def periodic_orbit(state: FloatArray, *, n_out: int, substeps: int, gap: float, K: float,
+                   D: float, B: float, omega: float, law: tuple[FloatArray, ...], a0: float,
+                   jac: FloatArray | None = None, max_iter: int = 30, tol: float = 1e-9,
+                   settle_periods: int = 0
+                   ) -> tuple[FloatArray, FloatArray, FloatArray | None, bool]:
+    """The model's periodic orbit through (near) ``state`` at ``tau = 0`` (drive phase 0).
+
+    Newton shooting on ``P(s) = s`` (``P``: one period of the compiled kernel), with the
+    finite-difference monodromy ``jac`` reused while the residual falls tenfold per step
+    (chord) and recomputed otherwise; steps are limited to 20 % of the state's scale. If
+    that fails and ``settle_periods > 0``, the model is integrated that many periods from
+    ``state`` (onto its attractor) and shooting starts again from there.
+
+    Returns the deflection at ``n_out`` equally spaced phases (shape (n_out,)), the orbit's
+    state at ``tau = 0`` (2,), the last monodromy (2, 2) and whether shooting converged.
+    """
+    kinds, p1, p2, cf = law
+
+    def pmap(s: FloatArray) -> tuple[FloatArray, FloatArray]:
+        xs, xe, ve = simulate_period(float(s[0]), float(s[1]), n_out, substeps, gap, K, D, B,
+                                     omega, kinds, p1, p2, cf, a0)
+        return xs, np.array([xe, ve])
+
+    s = np.array(state, float)
+    J = None if jac is None else jac.copy()
+    xs, s1, J1, ok = _shoot(pmap, s, J, max_iter, tol)
+    if ok or settle_periods <= 0:
+        return xs, s1, J1, ok
+    for _ in range(int(settle_periods)):
+        s = pmap(s)[1]
+        if not np.all(np.isfinite(s)):
+            return xs, s1, J1, False
+    return _shoot(pmap, s, None, max_iter, tol)
+
+
+def _shoot(pmap: Any, s: FloatArray, J: FloatArray | None, max_iter: int, tol: float
+           ) -> tuple[FloatArray, FloatArray, FloatArray | None, bool]:
+    last = math.inf
+    for _ in range(max_iter):
+        xs, ps = pmap(s)
+        r = ps - s
+        if not np.all(np.isfinite(r)):
+            return xs, s, None, False
+        scale = max(float(np.max(np.abs(s))), 1e-3)
+        err = float(np.max(np.abs(r)))
+        if err < tol * scale:
+            return xs, s, J, True
+        if J is None or err > 0.1 * last:
+            J = np.empty((2, 2))
+            for j in range(2):
+                h = 1e-7 * scale
+                sp = s.copy()
+                sp[j] += h
+                J[:, j] = (pmap(sp)[1] - ps) / h
+        last = err
+        try:
+            step = np.linalg.solve(J - np.eye(2), -r)
+        except np.linalg.LinAlgError:
+            return xs, s, None, False
+        m = float(np.max(np.abs(step)))
+        if m > 0.2 * scale:
+            step *= 0.2 * scale / m
+        s = s + step
+    xs, ps = pmap(s)
+    ok = bool(np.all(np.isfinite(ps))) and float(np.max(np.abs(ps - s))) < 1e-6 * max(
+        float(np.max(np.abs(s))), 1e-3)
+    return xs, s, J, ok
+
+
+def align_phase(X0: ComplexArray, Y: ComplexArray, sigma: FloatArray,
+                prior: tuple[float, float] | None = None) -> float:
+    """Drive phase ``phi`` minimising ``sum_k |X0_k e^{-i k phi} - Y_k|^2 / sigma_k^2``
+    (``k >= 1``) plus ``((phi - mean) / sd)^2`` for a ``prior`` ``(mean, sd)``.
+
+    A grid of ``max(256, 4 n)`` phases (one FFT) and then Newton steps; returns ``phi`` in
+    ``(-pi, pi]``.
+    """
+    k = np.arange(1, min(X0.size, Y.size))
+    w = 1.0 / sigma[k] ** 2
+    a = w * np.conj(Y[k]) * X0[k]            # cost = const - 2 Re sum a_k e^{-i k phi}
+    m = max(256, 4 * k.size)
+    full = np.zeros(m, complex)
+    full[k] = a
+    g = np.real(np.fft.fft(full))
+    phis = 2 * np.pi * np.arange(m) / m
+    f = -2.0 * g
+    if prior is not None:
+        f = f + (_wrap(phis - prior[0]) / prior[1]) ** 2
+    phi = float(phis[int(np.argmin(f))])
+    for _ in range(8):
+        e = a * np.exp(-1j * k * phi)
+        d1 = -2.0 * float(np.real(np.sum(-1j * k * e)))
+        d2 = -2.0 * float(np.real(np.sum(-(k**2) * e)))
+        if prior is not None:
+            d1 += 2.0 * _wrap(phi - prior[0]) / prior[1] ** 2
+            d2 += 2.0 / prior[1] ** 2
+        if d2 <= 0:
+            break
+        step = max(min(d1 / d2, 0.05), -0.05)
+        phi -= step
+        if abs(step) < 1e-13:
+            break
+    return float(_wrap(phi))
+
+
+def _wrap(a: Any) -> Any:
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi if np.ndim(a) else \
+        (float(a) + math.pi) % (2 * math.pi) - math.pi
+
+
+# ---------------------------------------------------------------------------- the law
+@final
+@dataclass(frozen=True, eq=False)
+class OutputErrorLaw:
+    """Parameter layout of the output-error fit for one support.
+
+    ``u = [K, D, B, a0, (p), c_1 .. c_m]``: lever stiffness, damping and drive amplitude,
+    contact onset, the exponent of ``library.terms[exponent_index]`` (absent when
+    ``exponent_index`` is None) and the force coefficients (``F_ts = sum_j c_j theta_j``).
+    """
+
+    library: AFMLibrary
+    exponent_index: int | None
+
+    @property
+    def n_head(self) -> int:
+        return 4 + (self.exponent_index is not None)
+
+    def library_at(self, u: FloatArray) -> AFMLibrary:
+        if self.exponent_index is None:
+            return self.library
+        return self.library.replace(self.exponent_index, Indentation(float(u[4])))
+
+    def encoded(self, u: FloatArray) -> tuple[FloatArray, ...]:
+        kinds, p1, p2 = self.library_at(u).encode()
+        return kinds, p1, p2, np.ascontiguousarray(u[self.n_head:], float)
+
+
+@final
+@dataclass(frozen=True, eq=False)
+class OutputErrorResult:
+    """What :class:`OutputErrorFit` found (immutable).
+
+    Attributes
+    ----------
+    law : OutputErrorLaw
+    u : ndarray, shape (n_head + n_terms,)
+        ``[K, D, B, a0, (p), c...]`` (lengths / ``L_ref``, forces / ``k L_ref``).
+    phases : ndarray, shape (n_obs,)
+        Drive phase ``phi_i`` of ``B cos(Omega tau - phi_i)`` [rad].
+    chi2 : float
+        Noise-weighted misfit plus priors at ``u``.
+    dof : int
+        Residuals minus fitted parameters (phases included).
+    converged : bool
+        Every observation's orbit was found by shooting.
+    covariance : ndarray, shape (n_u, n_u)
+        Gauss--Newton covariance of ``u`` (scaled by ``max(1, chi2 / dof)``; NaN if singular).
+    nfev : int
+    """
+
+    law: OutputErrorLaw
+    u: FloatArray
+    phases: FloatArray
+    chi2: float
+    dof: int
+    converged: bool
+    covariance: FloatArray
+    nfev: int = 0
+
+    @property
+    def library(self) -> AFMLibrary:
+        return self.law.library_at(self.u)
+
+    @property
+    def a0(self) -> float:
+        return float(self.u[3])
+
+    @property
+    def exponent(self) -> float | None:
+        return None if self.law.exponent_index is None else float(self.u[4])
+
+    @property
+    def dispersion(self) -> float:
+        return max(1.0, self.chi2 / max(self.dof, 1))
+
+    def coef(self, problem: JointProblem) -> FloatArray:
+        """Coefficients in the joint layout ``[-D, -K, drive..., c...]`` of ``problem``."""
+        K, D, B = (float(v) for v in self.u[:3])
+        out = np.zeros(problem.n_lin + self.law.library.n_terms)
+        out[0], out[1] = -D, -K
+        rot = problem.rotated
+        if rot.any():
+            out[N_LEVER] = B
+            for k, i in enumerate(np.flatnonzero(rot)):
+                out[N_LEVER + 1 + k] = B * math.sin(float(self.phases[i] - problem.rotations[i]))
+        j = problem.n_lin - 2 * int((~rot).sum())
+        for i in np.flatnonzero(~rot):
+            out[j], out[j + 1] = B * math.cos(self.phases[i]), B * math.sin(self.phases[i])
+            j += 2
+        out[problem.n_lin:] = self.u[self.law.n_head:]
+        return out
+
+
+# ---------------------------------------------------------------------------- objective
+@dataclass(eq=False)
+class _Objective:
+    """Residual vector of one fit (holds the shooting warm starts of ONE run; not shared)."""
+
+    problem: JointProblem
+    meas: MeasuredHarmonics
+    law: OutputErrorLaw
+    n_out: int
+    substeps: int
+    fixed: dict[int, float] = field(default_factory=dict)
+    states: FloatArray = field(init=False)
+    jacs: list[FloatArray | None] = field(init=False)
+    ok: bool = field(init=False, default=True)
+    phases: FloatArray = field(init=False)
+    found: NDArray[np.bool_] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.states = self.meas.start.copy()
+        self.jacs = [None] * self.problem.n_obs
+        self.phases = np.zeros(self.problem.n_obs)
+        self.found = np.zeros(self.problem.n_obs, bool)
+
+    def full(self, free: FloatArray) -> FloatArray:
+        if not self.fixed:
+            return np.asarray(free, float)
+        n = free.size + len(self.fixed)
+        u = np.empty(n)
+        mask = np.ones(n, bool)
+        for j, v in self.fixed.items():
+            u[j] = v
+            mask[j] = False
+        u[mask] = free
+        return u
+
+    def priors(self, u: FloatArray) -> list[float]:
+        pb = self.problem
+        cons = pb.constraints
+        out = []
+        for idx, mean, name in ((0, 1.0, "stiffness"), (1, 1.0 / pb.quality_factor, "damping")):
+            w = cons.prior(name)
+            if w is not None:
+                out.append((u[idx] - mean) / (w * mean))
+        fc = pb.drive_amplitude
+        if fc is not None:
+            w = cons.prior("drive", pb.drive_source)
+            if w is not None:
+                out.append((u[2] - fc) / (w * fc))
+        return out
+
+    def __call__(self, free: FloatArray) -> FloatArray:
+        u = self.full(free)
+        pb, meas = self.problem, self.meas
+        K, D, B, a0 = (float(v) for v in u[:4])
+        law = self.law.encoded(u)
+        nh = meas.n_harmonics
+        res = []
+        ok = True
+        for i, o in enumerate(pb.observations):
+            # an observation whose orbit was never found yet may settle onto it first
+            settle = 0 if self.found[i] else min(int(9.0 / (math.pi * max(D, 1e-6))), 3000)
+            xs, s, J, conv = periodic_orbit(self.states[i], n_out=self.n_out,
+                                            substeps=self.substeps, gap=o.gap, K=K, D=D, B=B,
+                                            omega=o.omega, law=law, a0=a0, jac=self.jacs[i],
+                                            settle_periods=settle)
+            if not conv or not np.all(np.isfinite(xs)):
+                ok = False
+                res.append(np.full(2 * nh + 1, _FAIL))
+                rot = float(pb.rotations[i])
+                if math.isfinite(rot) and math.isfinite(float(pb.phase_widths[i])):
+                    res.append(np.array([_FAIL]))
+                continue
+            self.states[i], self.jacs[i], self.found[i] = s, J, True
+            X = np.fft.rfft(xs)[:nh + 1] * (2.0 / xs.size)
+            X[0] *= 0.5
+            rot, w = float(pb.rotations[i]), float(pb.phase_widths[i])
+            prior = (rot, w) if math.isfinite(rot) and math.isfinite(w) else None
+            phi = align_phase(X, meas.Y[i], meas.sigma[i], prior)
+            self.phases[i] = phi
+            d = (X * np.exp(-1j * np.arange(nh + 1) * phi) - meas.Y[i]) / meas.sigma[i]
+            r = np.concatenate([[d[0].real], d[1:].real, d[1:].imag])
+            res.append(np.where(np.isfinite(r), r, 0.0))
+            if prior is not None:
+                res.append(np.array([_wrap(phi - rot) / w]))
+        self.ok = ok
+        res.append(np.asarray(self.priors(u), float))
+        return np.concatenate(res)
+
+
+def _bounds(problem: JointProblem, law: OutputErrorLaw, u0: FloatArray
+            ) -> tuple[FloatArray, FloatArray]:
+    cons = problem.constraints
+    lo = np.full(u0.size, -np.inf)
+    hi = np.full(u0.size, np.inf)
+    for idx, mean, name in ((0, 1.0, "stiffness"), (1, 1.0 / problem.quality_factor,
+                                                    "damping")):
+        t = cons.box(name)
+        lo[idx], hi[idx] = mean * (1 - t), mean * (1 + t)
+    fc = problem.drive_amplitude
+    if fc is not None:
+        t = cons.box("drive")
+        lo[2], hi[2] = fc * (1 - t), fc * (1 + t)
+    else:
+        lo[2] = 0.0
+    lo[3], hi[3] = problem.a0_range
+    if law.exponent_index is not None:
+        lo[4], hi[4] = 0.5, 4.0
+    if problem.physical_signs:
+        sg = np.array([t.sign for t in law.library.terms], int)
+        h = law.n_head
+        lo[h:][sg > 0] = 0.0
+        hi[h:][sg < 0] = 0.0
+    return lo, hi
+
+
+def _start(problem: JointProblem, law: OutputErrorLaw, a0: float, coef: FloatArray
+           ) -> FloatArray:
+    """``u`` from an equation-error solution in the joint layout."""
+    n_lin = problem.n_lin
+    rot = problem.rotated
+    if rot.any():
+        B = float(np.hypot(coef[N_LEVER], coef[N_LEVER + 1]))
+    else:
+        j = n_lin - 2 * int((~rot).sum())
+        B = float(np.mean([np.hypot(coef[j + 2 * k], coef[j + 2 * k + 1])
+                           for k in range(int((~rot).sum()))]))
+    head = [-float(coef[1]), -float(coef[0]), B, float(a0)]
+    if law.exponent_index is not None:
+        head.append(float(law.library.terms[law.exponent_index].p))
+    return np.array([*head, *np.asarray(coef[n_lin:], float)])
+
+
+# ---------------------------------------------------------------------------- stages
+@final
+@dataclass(frozen=True)
+class OutputErrorFit:
+    """Refine the shared law and the drive phases against every observation's harmonics.
+
+    Parameters
+    ----------
+    n_harmonics : int
+        Harmonics compared per observation (capped by each record's own harmonic fit).
+    n_out : int
+        Kernel output samples per period (the orbit's FFT length; >= 4 n_harmonics).
+    substeps : int
+        RK4 steps per output sample.
+    max_nfev : int
+        Evaluation budget of the trust-region least squares.
+    """
+
+    n_harmonics: int = 30
+    n_out: int = 128
+    substeps: int = 1
+    max_nfev: int = 40
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.n_harmonics, int) and self.n_harmonics >= 1):
+            raise ValueError(f"n_harmonics must be an integer >= 1, got {self.n_harmonics!r}")
+        if not (isinstance(self.n_out, int) and self.n_out >= 4 * self.n_harmonics):
+            raise ValueError(f"n_out must be an integer >= 4 n_harmonics, got {self.n_out!r}")
+        if not (isinstance(self.substeps, int) and self.substeps >= 1):
+            raise ValueError(f"substeps must be an integer >= 1, got {self.substeps!r}")
+        if not (isinstance(self.max_nfev, int) and self.max_nfev >= 1):
+            raise ValueError(f"max_nfev must be an integer >= 1, got {self.max_nfev!r}")
+
+    def measure(self, problem: JointProblem) -> MeasuredHarmonics:
+        return measured_harmonics(problem, self.n_harmonics)
+
+    def solve(self, problem: JointProblem, meas: MeasuredHarmonics, law: OutputErrorLaw,
+              u0: FloatArray, *, fixed: dict[int, float] | None = None,
+              states: FloatArray | None = None, max_nfev: int | None = None
+              ) -> tuple[OutputErrorResult, FloatArray]:
+        """Least squares from ``u0`` with the entries ``fixed`` held; also the orbits' states
+        (n_obs, 2) at the end (warm starts for a neighbouring fit)."""
+        obj = _Objective(problem, meas, law, self.n_out, self.substeps, dict(fixed or {}))
+        if states is not None:
+            obj.states = np.array(states, float)
+        lo, hi = _bounds(problem, law, u0)
+        u0 = np.clip(np.asarray(u0, float), lo, hi)
+        mask = np.ones(u0.size, bool)
+        for j in obj.fixed:
+            mask[j] = False
+        x0, lo_f, hi_f = u0[mask], lo[mask], hi[mask]
+        # keep the start strictly inside (trf needs it)
+        span = np.where(np.isfinite(hi_f - lo_f), hi_f - lo_f, 0.0)
+        x0 = np.clip(x0, lo_f + 1e-9 * span, hi_f - 1e-9 * span)
+        scale = np.maximum(np.abs(x0), 1e-6)
+        scale[~np.isfinite(scale)] = 1.0
+        r0 = obj(x0)
+        if not obj.ok:  # the start's orbits cannot be found: nothing to refine
+            cov = np.full((u0.size, u0.size), np.nan)
+            return (OutputErrorResult(law=law, u=obj.full(x0), phases=obj.phases.copy(),
+                                      chi2=math.inf, dof=1, converged=False, covariance=cov),
+                    obj.states.copy())
+        fit = least_squares(obj, x0, bounds=(lo_f, hi_f), x_scale=scale, diff_step=1e-6,
+                            method="trf", max_nfev=max_nfev or self.max_nfev, xtol=1e-8,
+                            ftol=1e-6)
+        x = fit.x if float(fit.cost) <= 0.5 * float(r0 @ r0) else x0
+        r = obj(x)
+        chi2 = float(r @ r)
+        n_res = int(np.sum(r != 0.0))
+        dof = max(n_res - int(mask.sum()) - problem.n_obs, 1)
+        cov = np.full((u0.size, u0.size), np.nan)
+        try:
+            Jm = fit.jac
+            c = np.linalg.pinv(Jm.T @ Jm) * max(1.0, chi2 / dof)
+            idx = np.flatnonzero(mask)
+            cov[np.ix_(idx, idx)] = c
+        except (np.linalg.LinAlgError, ValueError):
+            pass
+        res = OutputErrorResult(law=law, u=obj.full(x), phases=obj.phases.copy(), chi2=chi2,
+                                dof=dof, converged=obj.ok, covariance=cov, nfev=int(fit.nfev))
+        return res, obj.states.copy()
+
+    def run(self, problem: JointProblem, library: AFMLibrary, a0: float, coef: FloatArray,
+            exponent: float | None) -> tuple[OutputErrorResult, MeasuredHarmonics]:
+        """Refine the equation-error solution ``(library, a0, coef)`` (joint layout).
+
+        ``exponent``: the dominant ``delta^p`` term's exponent (fitted too), or None.
+        """
+        idx = None
+        if exponent is not None:
+            js = [j for j, t in enumerate(library.terms)
+                  if isinstance(t, Indentation) and t.p == exponent]
+            idx = js[0] if js else None
+        law = OutputErrorLaw(library=library, exponent_index=idx)
+        meas = self.measure(problem)
+        res, _ = self.solve(problem, meas, law, _start(problem, law, a0, coef))
+        return res, meas
+
+
+@final
+@dataclass(frozen=True)
+class OutputErrorProfile:
+    """Profile likelihood of the contact exponent over the output-error objective.
+
+    From the fitted exponent outwards in ``step`` increments (each point re-optimises every
+    other parameter from its neighbour's solution) until ``chi2`` exceeds the 95 % level by
+    a margin or the range ``[low, high]`` ends; the interval's ends are interpolated
+    linearly in ``sqrt(chi2 - chi2_min)`` (exact for a quadratic profile). The level is
+    ``3.841 * max(1, chi2_min / dof)`` (quasi-likelihood: a law that cannot fit every orbit
+    to the noise widens the interval). ``bounded`` is False when the interval reaches
+    ``low`` or ``high``. A lower minimum found along the way moves the estimate there (the
+    start was a local minimum).
+    """
+
+    low: float = 0.5
+    high: float = 4.0
+    step: float = 0.2
+    max_points: int = 20
+    max_nfev: int = 30
+
+    def run(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
+            best: OutputErrorResult) -> tuple[dict[str, Any], OutputErrorResult]:
+        """The profile table and interval, and the best solution found (``best`` or a
+        better point of the profile, re-fitted with the exponent free)."""
+        assert best.law.exponent_index is not None
+        pts: dict[float, OutputErrorResult] = {round(float(best.u[4]), 6): best}
+        level = 3.841 * best.dispersion
+        p0 = float(best.u[4])
+        n = 0
+        for direction in (-1.0, 1.0):
+            prev, states = best, None
+            p = p0
+            while n < self.max_points:
+                p = round(p + direction * self.step, 6)
+                if not self.low - 1e-9 <= p <= self.high + 1e-9:
+                    break
+                u0 = prev.u.copy()
+                # the contact coefficient rescaled to keep the force at the deepest
+                # indentation: a start near the new exponent's optimum
+                depth = max(float(prev.u[3]) - problem.z_min(), 1e-6)
+                u0[best.law.n_head + best.law.exponent_index] *= depth ** (float(prev.u[4]) - p)
+                u0[4] = p
+                r, states = fit.solve(problem, meas, best.law, u0, fixed={4: p},
+                                      states=states, max_nfev=self.max_nfev)
+                n += 1
+                pts[p] = r
+                if math.isfinite(r.chi2):
+                    prev = r
+                cmin = min(v.chi2 for v in pts.values())
+                if r.chi2 - cmin > level + 2.0:
+                    break
+        ks = sorted(pts)
+        prof = np.array([(k, pts[k].chi2) for k in ks])
+        k_min = ks[int(np.nanargmin(prof[:, 1]))]
+        if pts[k_min].chi2 < best.chi2 - 1e-6 * max(best.chi2, 1.0):
+            # a better basin along the profile: free the exponent again from there
+            better, _ = fit.solve(problem, meas, best.law, pts[k_min].u)
+            if better.chi2 < pts[k_min].chi2:
+                best = better
+                pts[round(float(better.u[4]), 6)] = better
+            else:
+                best = pts[k_min]
+            ks = sorted(pts)
+            prof = np.array([(k, pts[k].chi2) for k in ks])
+        level = 3.841 * best.dispersion
+        lo, hi, crossed = _crossings(prof, level)
+        bounded = bool(crossed and lo > self.low + 1e-9 and hi < self.high - 1e-9)
+        return ({"profile": prof, "interval": (lo, hi), "bounded": bounded,
+                 "best_exponent": float(best.u[4]), "level": level,
+                 "dispersion": best.dispersion, "objective": "output_error"}, best)
+
+
+def _crossings(prof: FloatArray, level: float) -> tuple[float, float, bool]:
+    """Where ``chi2 - min`` last rises above ``level`` on either side of the minimum, and
+    whether it does on both sides (else that end is the profile's end).
+
+    Interpolated linearly in ``sqrt(chi2 - min)``, which is linear in the parameter for a
+    quadratic profile (so a coarse grid does not shrink the interval). Every point at or below
+    the level lies inside (a profile with two dips gives the hull).
+    """
+    p, c = prof[:, 0], prof[:, 1]
+    ok = np.isfinite(c)
+    p, c = p[ok], np.sqrt(np.maximum(c[ok] - np.min(c[ok]), 0.0))
+    t = math.sqrt(level)
+    inside = np.flatnonzero(c <= t)
+    a, b = int(inside.min()), int(inside.max())
+    lo, hi = float(p[a]), float(p[b])
+    if a > 0:
+        lo = float(p[a] + (t - c[a]) / (c[a - 1] - c[a]) * (p[a - 1] - p[a]))
+    if b < p.size - 1:
+        hi = float(p[b] + (t - c[b]) / (c[b + 1] - c[b]) * (p[b + 1] - p[b]))
+    return lo, hi, bool(a > 0 and b < p.size - 1)
+
+
+# ---------------------------------------------------------------------------- support
+def _bic(r: OutputErrorResult) -> float:
+    """``chi2 + n_u log(n_res)`` (Schwarz's criterion for Gaussian residuals of known noise)."""
+    return r.chi2 + r.u.size * math.log(max(r.dof + r.u.size, 2))
+
+
+@final
+@dataclass(frozen=True)
+class OutputErrorSupport:
+    """Which force terms the output-error law keeps: one term at a time, by BIC on ``chi2``.
+
+    The equation-error selection ranks the terms (its forward path) but judges them on rows
+    whose denoised orbit is wrong near the turning point, where it buys ``x^k`` or damping
+    terms in place of the contact law. Here the support is revised on the output-error
+    objective: up to ``max_add`` terms that entered the forward path after the chosen support
+    are tried one at a time (kept if the BIC falls), then every term but the dominant contact
+    term is tried for removal (dropped while the BIC falls).
+    """
+
+    max_add: int = 3
+    max_nfev: int = 40
+
+    def run(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
+            base: OutputErrorResult, extra: list[Any]) -> OutputErrorResult:
+        """``extra``: candidate additions, each a term or a tuple of terms entered together
+        (the sphere's van der Waals pair ``z^-2 [z>a0]`` + ``[z<=a0]``, whose coefficients
+        make the force continuous at ``a0`` only together)."""
+        best = base
+        tried = 0
+        for cand in extra:
+            if tried >= self.max_add:
+                break
+            group = list(cand) if isinstance(cand, tuple) else [cand]
+            names = {t.name for t in best.law.library.terms}
+            group = [t for t in group if t.name not in names]
+            if not group:
+                continue
+            tried += 1
+            lib = AFMLibrary([*best.law.library.terms, *group])
+            law = OutputErrorLaw(library=lib, exponent_index=best.law.exponent_index)
+            r, _ = fit.solve(problem, meas, law, np.append(best.u, np.zeros(len(group))),
+                             max_nfev=self.max_nfev)
+            if r.converged and _bic(r) < _bic(best):
+                best = r
+        changed = True
+        while changed and best.law.library.n_terms > 1:
+            changed = False
+            h = best.law.n_head
+            trials = []
+            for j in range(best.law.library.n_terms):
+                if j == best.law.exponent_index:
+                    continue
+                keep = np.ones(best.law.library.n_terms, bool)
+                keep[j] = False
+                ei = best.law.exponent_index
+                law = OutputErrorLaw(library=best.law.library.subset(keep),
+                                     exponent_index=None if ei is None else ei - (j < ei))
+                u0 = np.concatenate([best.u[:h], best.u[h:][keep]])
+                r, _ = fit.solve(problem, meas, law, u0, max_nfev=self.max_nfev)
+                if r.converged:
+                    trials.append(r)
+            if trials:
+                r = min(trials, key=_bic)
+                if _bic(r) < _bic(best):
+                    best, changed = r, True
+        return best
+
+
+# ---------------------------------------------------------------------------- the stage
+@final
+@dataclass(frozen=True)
+class OutputErrorStage:
+    """The joint fit's output-error stage: refine, revise the support, profile the exponent.
+
+    ``run`` takes the equation-error solution and returns the output-error one (or None when
+    its orbits cannot be found: the caller keeps the equation-error law) and the exponent's
+    profile over the output-error objective (None without a contact term).
+    """
+
+    fit: OutputErrorFit = field(default_factory=OutputErrorFit)
+    support: OutputErrorSupport | None = field(default_factory=OutputErrorSupport)
+    profile: OutputErrorProfile | None = field(default_factory=OutputErrorProfile)
+
+    def run(self, problem: JointProblem, library: AFMLibrary, a0: float, coef: FloatArray,
+            exponent: float | None, extra: list[Any] | None = None
+            ) -> tuple[OutputErrorResult | None, dict[str, Any] | None]:
+        res, meas = self.fit.run(problem, library, a0, coef, exponent)
+        if not res.converged or not math.isfinite(res.chi2):
+            res = self._restart(problem, meas, res)
+        if not res.converged or not math.isfinite(res.chi2):
+            return None, None
+        if self.support is not None:
+            res = self.support.run(self.fit, problem, meas, res, list(extra or []))
+        expo = None
+        if self.profile is not None and res.law.exponent_index is not None:
+            expo, res = self.profile.run(self.fit, problem, meas, res)
+            expo["term_index"] = int(res.law.exponent_index)
+            expo["cv_interval"] = (math.nan, math.nan)
+            expo["cv_bounded"] = False
+        return res, expo
+
+
+    def _restart(self, problem: JointProblem, meas: MeasuredHarmonics,
+                 failed: OutputErrorResult) -> OutputErrorResult:
+        """Starts with one other force term (or all of them) set to zero, when some orbit of
+        the equation-error law is not found (measured: a force jump at ``a0`` whose light
+        tapping orbits graze it); the best converged one, or ``failed``."""
+        law, u = failed.law, failed.u
+        h = law.n_head
+        others = [j for j in range(law.library.n_terms) if j != law.exponent_index]
+        starts = [[j] for j in others] + ([others] if len(others) > 1 else [])
+        best = failed
+        for zero in starts:
+            u0 = u.copy()
+            u0[[h + j for j in zero]] = 0.0
+            r, _ = self.fit.solve(problem, meas, law, u0)
+            if r.converged and (not best.converged or r.chi2 < best.chi2):
+                best = r
+        return best
+
+
+def covariance_samples(res: OutputErrorResult, problem: JointProblem, n: int, seed: int
+                       ) -> FloatArray:
+    """``n`` coefficient vectors (joint layout) drawn from the Gauss--Newton covariance of
+    the force coefficients (shape (n, n_lin + n_terms); empty when it is not finite)."""
+    coef = res.coef(problem)
+    h = res.law.n_head
+    cov = res.covariance[h:, h:]
+    if n <= 0 or not np.all(np.isfinite(cov)):
+        return np.empty((0, coef.size))
+    rng = np.random.default_rng(seed)
+    out = np.tile(coef, (n, 1))
+    out[:, problem.n_lin:] = rng.multivariate_normal(res.u[h:], cov, size=n,
+                                                     check_valid="ignore")
+    return out
