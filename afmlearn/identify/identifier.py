@@ -1,27 +1,23 @@
 """`ForceIdentifier`: constrained sparse regression of the tip--sample force from deflection.
 
-Pipeline (physics.md section 5, with the changes the issue's measurements call for):
+The estimator holds settings only; :meth:`ForceIdentifier.fit` builds an immutable problem,
+runs a short sequence of frozen stage objects on it and assigns the fitted attributes once at
+the end. Two problems, one pattern:
 
-1. **Calibrate** the trace (``afmlearn.preprocess``): dimensionless time and lengths, ``F_c``.
-2. **Split** off the last ``heldout_fraction`` of the periods; it is never used for fitting and
-   measures the state accuracy of every candidate.
-3. **Denoise** the training span: a Fourier series over all periods when the data are periodic
-   (steady state), Savitzky--Golay otherwise. Force terms are evaluated on this state.
-4. **Project** the equation of motion on rows (:class:`HarmonicBalance` for periodic data,
-   :class:`WeakForm` otherwise): no derivative of noisy data is ever taken.
-5. **Constrain** ``K``, ``D``, ``B`` by boxes and calibration priors
-   (:class:`CalibrationConstraints`); the drive phase is estimated, then the drive is rotated so
-   that its amplitude gets a box.
-6. **Contact onset a0** is profiled jointly: every ``a0`` on a grid spanning the orbit's
-   smallest gaps gets its own sparse fit; the best (and a bounded refinement) is kept.
-7. **Model selection**: threshold x nu grid (:class:`GridSearch`, rolling cross-validation),
-   each distinct support scored by held-out state error (simulation from the measured state)
-   and, when the true force is given (training), force error; the knee of the 3-D Pareto front
-   is the choice, AICc the second opinion.
-8. **Refine** the continuous parameters of the chosen support (``a0``, exponents, decay
-   lengths) by Nelder--Mead on the constrained least-squares residual.
-9. **Bag** the chosen model with a moving-block bootstrap over row blocks, constraints kept, for
-   coefficient and force bands.
+- **one orbit** (a trace, one row, a ramp; physics.md section 5):
+  :func:`~afmlearn.identify.single_problem.build_orbit_problem` splits off the last
+  ``heldout_fraction`` of the periods (never fitted; it scores the candidates), denoises (Fourier
+  series when periodic, Savitzky--Golay otherwise) and projects the equation of motion on rows
+  (:class:`HarmonicBalance` / :class:`WeakForm`: no derivative of noisy data); then
+  :func:`~afmlearn.identify.single.fit_orbit` runs noise scale -> ``a0`` profile -> drive
+  phase -> selection (SR3 grid + forward path, ``a0`` re-profiled) -> Pareto choice (CV error,
+  held-out state error, training force error) -> refinement -> bagging; the exponent profile
+  and summary are :mod:`afmlearn.identify.single_outputs`;
+- **an experiment of several observations**: :func:`~afmlearn.identify.problem.build_problem`
+  and :func:`~afmlearn.identify.joint.fit_joint` (one law shared by every set-point).
+
+Boxes and calibration priors on ``K``, ``D``, ``B`` (:class:`CalibrationConstraints`) and the
+physical signs of the terms hold in every fit of both paths.
 """
 
 from __future__ import annotations
@@ -132,7 +128,14 @@ class ForceIdentifier:
 
     Attributes
     ----------
-    calibrated_ : Calibrated
+    calibrated_ : Calibrated or None
+        The single orbit's calibration (None after a joint fit).
+    orbit_ : OrbitResult or None
+        What the single-orbit stages found (:func:`afmlearn.identify.single.fit_orbit`);
+        None after a joint fit.
+    joint_ : JointResult or None
+        What the joint stages found (:func:`afmlearn.identify.joint.fit_joint`); None after
+        a single-orbit fit.
     model_ : IdentifiedModel
         The chosen model (knee of the Pareto front), refined.
     ic_model_ : IdentifiedModel
@@ -251,7 +254,6 @@ class ForceIdentifier:
         from .joint_outputs import joint_force, joint_model, joint_summary
         from .problem import build_problem
 
-        self.warnings_ = []
         library = AFMLibrary.standard() if self.library is None else self.library
         if self.projection is not None and not isinstance(self.projection, HarmonicBalance):
             raise ValueError("a joint fit of steady observations uses HarmonicBalance; got "
@@ -263,9 +265,9 @@ class ForceIdentifier:
             min_harmonics=self.min_harmonics, projection=self.projection or HarmonicBalance(),
             physical_signs=self.physical_signs,
             a0_range_m=None if self.a0_range_m is None else tuple(self.a0_range_m))
-        if problem.drive_amplitude is None:
-            self.warnings_.append("no free data (free_deflection_m or free_amplitude_m): the "
-                                  "drive amplitude is not constrained")
+        warns = [] if problem.drive_amplitude is not None else [
+            "no free data (free_deflection_m or free_amplitude_m): the drive amplitude is not "
+            "constrained"]
         res = fit_joint(problem, library, drive=self.drive_phase,
                         onset=ContactOnsetProfile(n_a0=self.n_a0),
                         selection=SupportSelection(max_terms=self.max_terms),
@@ -277,14 +279,17 @@ class ForceIdentifier:
         bands = (None if res.samples.shape[0] < 5
                  else np.percentile(res.samples[:, n_lin:], [2.5, 97.5], axis=0))
         chosen = res.candidates[res.knee_index]
-        self.model_ = joint_model(res, res.coef, res.library, res.a0, bands=bands, info={
+        model = joint_model(res, res.coef, res.library, res.a0, bands=bands, info={
             "n_terms": chosen.n_terms, "cv_error": chosen.cv_error,
             "projection": "HarmonicBalance", "periodic": True, "joint": True,
             "n_observations": res.problem.n_obs})
+        forces = joint_force(res)
+        # -- the fitted attributes, assigned once
+        self.warnings_ = warns
+        self.joint_, self.orbit_, self.calibrated_ = res, None, None
+        self.model_ = model
         self.ic_model_ = joint_model(res, res.ic_coef, res.selection_library,
                                      res.selection_a0)
-        forces = joint_force(res)
-        self.joint_ = res
         self.candidates_ = res.candidates
         self.knee_index_, self.ic_index_ = res.knee_index, res.ic_index
         self.objectives_ = ("cv_error",)
@@ -297,7 +302,7 @@ class ForceIdentifier:
         self.state_x_, self.state_v_ = forces["x"], forces["v"]
         self.heldout_start_ = int(forces["x"].shape[1])  # nothing held out: CV over blocks
         self.exponent_profile_ = None if res.exponent is None else res.exponent["profile"]
-        self.summary_ = joint_summary(res, self.model_, forces)
+        self.summary_ = joint_summary(res, model, forces)
         self.drive_phase_candidates_ = []
         return self
 
@@ -389,8 +394,7 @@ class ForceIdentifier:
                                       exponent=OrbitExponentProfile(), true_force=true_force)
         # -- the fitted attributes, assigned once
         self.warnings_ = _calibration_warnings(cal)
-        self.calibrated_ = cal
-        self.orbit_ = res
+        self.joint_, self.orbit_, self.calibrated_ = None, res, cal
         self.heldout_start_ = pb.heldout_start
         self.periodic_ = pb.periodic
         self.projection_ = pb.projection
