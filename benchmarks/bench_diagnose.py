@@ -379,11 +379,48 @@ def series_section(records: list[dict], variants: list[tuple[int, bool]]) -> str
     return "\n".join(out)
 
 
+def series_calibrate(args: argparse.Namespace, settings: list[tuple[int, float]],
+                     rec_dir: Path) -> int:
+    """Null calibration on set-point series: ``--null`` null series per setting (8 set-points,
+    drive phase recorded; seeds disjoint from the evaluation draws: ``set_id`` 5), diagnosed
+    one by one (resumable: ``series_null.jsonl``); the thresholds (:func:`calibrate`) go to
+    the ``"series"`` section of ``null_calibration.json``, the single-record ones are kept."""
+    jobs = [{"set_id": 5, "spp": spp, "noise": noise, "cause": "none", "index": i,
+             "seed": args.seed, "periods": args.periods, "n_points": 8, "phase": True,
+             "files": str(rec_dir / "series_null_files")}
+            for i in range(args.null) for spp, noise in settings]
+    recs = run_series_jobs(jobs, rec_dir / "series_null.jsonl", args.workers)
+    ok = [r for r in recs if r.get("candidates")]
+    if not ok:
+        print("no null series diagnosed yet")
+        return 1
+    calib = calibrate(ok, args.family_rate)
+    n_false = sum(any(c["delta_chi2"] > calib.thresholds[c["cause"]] for c in r["candidates"])
+                  for r in ok)
+    upper = 1.0 - 0.05 ** (1.0 / len(ok))
+    src = (calib.source.replace("null traces", "null 8-set-point series (drive phase "
+                                "recorded)")
+           + f"; {len(recs) - len(ok)} raised; {n_false}/{len(ok)} null series with a "
+           f"cause above these thresholds (in-sample), one-sided 95 % upper bound on the "
+           f"family-wise rate when none: {100 * upper:.1f} %")
+    d = json.loads(CALIBRATION.read_text())
+    d["series"] = {"thresholds": calib.thresholds, "min_gain": calib.min_gain, "source": src}
+    if not args.no_doc:
+        tmp = CALIBRATION.with_suffix(".json.tmp")
+        tmp.write_text(json.dumps(d, indent=1) + "\n")
+        os.replace(tmp, CALIBRATION)
+    print("series thresholds:", calib.thresholds)
+    print(src)
+    return 0
+
+
 def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
                 info: dict[str, str]) -> int:
     variants = [(int(n), ph == "phase") for n, ph in
                 (v.split(":") for v in args.variants.split(","))]
     rec_dir = Path(args.records)
+    if args.calibrate:
+        return series_calibrate(args, settings, rec_dir)
     jobs = series_jobs(settings, args.per_cause, args.pairs, args.periods, args.seed,
                        rec_dir / "series_files", variants,
                        causes=args.causes.split(",") if args.causes else None)

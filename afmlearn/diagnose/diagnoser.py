@@ -129,7 +129,7 @@ class Candidate:
     """One tested cause: its fitted extension and the evidence for it.
 
     ``model`` is the extension at the representative observation; ``solution`` the joint fit
-    (output error; ``phases`` per observation); ``heldout_nrmse`` the mean over the held-out
+    (output error; ``phases`` per observation); ``heldout_nrmse`` the median over the held-out
     observations and ``nrmse_per_observation`` each (NaN where not held out, or everywhere
     when the evidence was below the chi-square point and the gain was not computed: then
     ``gain`` is NaN).
@@ -306,7 +306,8 @@ class Diagnoser:
     confidence_ : float
         Of the first step's answer.
     baseline_nrmse_, extended_nrmse_ : float
-        Mean held-out NRMSE over the held-out observations.
+        Median held-out NRMSE over the held-out observations (robust to one set-point
+        predicted on another branch).
     exponent_, exponent_interval_, exponent_bounded_ : float, (float, float), bool or None
         Contact exponent of the contact_geometry extension, its 95 % profile-likelihood
         interval and whether the data bound it (None when it was not tested).
@@ -507,6 +508,8 @@ class Diagnoser:
                 f, c = self._test(h, current, ctx, calib, traces, tested, step=k)
                 fits.append(f)
                 cands.append(c)
+            if k > 0 and n_obs > 1 and self._common_basin(remaining, fits, cands, current):
+                current.nrmse[:] = self._heldout(current)
             self._gains(remaining, fits, cands, current, calib)
             idx, conf = name_cause([c.delta_chi2 for c in cands], [c.gain for c in cands],
                                    [c.threshold for c in cands], calib.min_gain)
@@ -642,6 +645,67 @@ class Diagnoser:
             text += f"; {c.details['text']}"
         return text
 
+    def _common_basin(self, hyps: Sequence[AbstractHypothesis], fits: list[_Fit],
+                      cands: list[Candidate], current: _Fit, *, max_checks: int = 4) -> bool:
+        """Evidence only from the extension: the current model refitted from each significant
+        candidate's point (its extension switched off) must not reach that candidate's chi2.
+
+        An extension's fit starts from its own equation-error solution, so it can land in a
+        better basin of the parameters it shares with the current model (``a0``, stiffness,
+        damping, drive) than the current model's own refinement did; that drop is then
+        evidence for *every* cause. Measured on 8-set-point series (200 samples/period, 1 %
+        noise) at step 2: all six remaining causes dropped chi2 by 12-19 against a current
+        model at 290 that 100 more iterations of its own refinement left at 289.7 (visco
+        draw; named a spurious ``contact_geometry`` with held-out gain 0.41), and 25-36 on a
+        detector draw. The significant candidates are checked in the order of their penalised
+        evidence (at most ``max_checks``); when the nested refit is better, it becomes the
+        current model (in place: ``current.sol``) and every candidate's drop is re-measured
+        against it (a candidate that ends above the new current model has no evidence: it was
+        not refitted from there). Returns whether the current model changed (its held-out
+        NRMSE is then stale). Used from the second step on: the first step's statistics are
+        the ones the null calibration measured (and there, re-basing the baseline on one
+        candidate's point left the other candidates' fits above it: measured on a
+        visco + detector series, drops of -2e4).
+        """
+        changed = False
+        checked: set[int] = set()
+        for _ in range(max_checks):
+            todo = [j for j in range(len(cands))
+                    if j not in checked and cands[j].delta_chi2 > cands[j].threshold]
+            if not todo:
+                break
+            j = min(todo, key=lambda i: cands[i].threshold - cands[i].delta_chi2)
+            checked.add(j)
+            nested = self._nested_refit(fits[j], current)
+            self._log(f"  {cands[j].cause}: current model refitted from its point: chi2 "
+                      f"{nested.chi2:.2f} (was {current.sol.chi2:.2f}, extension "
+                      f"{cands[j].chi2:.2f})")
+            if nested.chi2 >= current.sol.chi2:
+                continue
+            current.sol = nested
+            changed = True
+            for c, h in zip(cands, hyps, strict=True):
+                c.delta_chi2 = float(nested.chi2 - c.chi2)
+                c.evidence = self._evidence_text(h, c, self._energies[id(c)])
+        return changed
+
+    def _nested_refit(self, fit: _Fit, current: _Fit) -> Solution:
+        """The current model's structure refined from ``fit``'s point: its shared ``a0``,
+        stiffness, damping, drive, phases and force coefficients (columns it adds dropped)."""
+        sol, cur = fit.sol, current.sol
+        vals = (sol.values[0], *cur.values[1:])
+        spec = current.build(vals)
+        coef = np.array(cur.coef, float)
+        coef[:3] = sol.coef[:3]
+        theirs = sol.spec.term_keys()
+        for j, key in enumerate(spec.term_keys()):
+            if key in theirs:
+                coef[3 + j] = sol.coef[3 + theirs.index(key)]
+        start = dataclasses.replace(cur, spec=spec, coef=coef, values=vals, phases=sol.phases)
+        out, _ = self._oe.refine(start, current.build, current.params,
+                                 max_nfev=self.joint_nfev)
+        return out
+
     def _gains(self, hyps: Sequence[AbstractHypothesis], fits: list[_Fit],
                cands: list[Candidate], current: _Fit, calib: NullCalibration) -> None:
         """Held-out gains: of every candidate above the chi-square point of its parameter
@@ -657,8 +721,8 @@ class Diagnoser:
                 continue
             f.nrmse[:] = self._heldout(f)
             c.nrmse_per_observation = f.nrmse
-            c.heldout_nrmse = _mean(f.nrmse)
-            g = 1.0 - c.heldout_nrmse / _mean(current.nrmse)
+            c.heldout_nrmse = _typical(f.nrmse)
+            g = 1.0 - c.heldout_nrmse / _typical(current.nrmse)
             c.gain = float(g) if math.isfinite(g) else -math.inf
             c.significant = bool(c.delta_chi2 > c.threshold and c.gain > calib.min_gain)
             c.evidence = self._evidence_text(h, c, self._energies[id(c)])
@@ -726,8 +790,8 @@ class Diagnoser:
         self.heldout_start_ = (self._span(obs[0], True)[1] if self.design_ == "tail" else 0)
         self.baseline_ = r.baseline
         self.extended_ = r.extended
-        self.baseline_nrmse_ = _mean(base.nrmse)
-        self.extended_nrmse_ = _mean(final.nrmse)
+        self.baseline_nrmse_ = _typical(base.nrmse)
+        self.extended_nrmse_ = _typical(final.nrmse)
         self.gain_ = (1.0 - self.extended_nrmse_ / self.baseline_nrmse_
                       if named and self.baseline_nrmse_ > 0 else 0.0)
         if self.extended_nrmse_ > MISFIT_NRMSE:
@@ -786,11 +850,16 @@ class Diagnoser:
         return float(np.mean(drive * o.ydot - o.ydot**2 / o.quality_factor) * per)
 
 
-def _mean(a: FloatArray) -> float:
-    """Mean over the observations held out (NaN: not held out; inf: no prediction)."""
+def _typical(a: FloatArray) -> float:
+    """Median over the observations held out (NaN: not held out; inf: no prediction).
+
+    Not the mean: one held-out set-point whose predicted orbit lands elsewhere (measured on a
+    null 8-set-point series: NRMSE 5.1 at one set-point, 5e-4..1e-3 at the seven others, for
+    the baseline and every extension alike) would decide a mean, hiding every real gain, and
+    an extension that moves that one prediction would show a gain it did not earn."""
     a = np.asarray(a, float)
     a = a[~np.isnan(a)]
-    return float(np.mean(a)) if a.size else math.nan
+    return float(np.median(a)) if a.size else math.nan
 
 
 def name_cause(delta_chi2: list[float], gains: list[float], thresholds: list[float],
