@@ -13,6 +13,11 @@ figures (afmlearn.plots.diagnose.plot_all, drawn here: the analysis never import
 plots); the file's /labels group is never read. Bad input (missing calibration, fewer than 20
 samples per drive period, clipped signal, NaN, not a trace file, a sweep without `row`)
 prints `error: ...` and exits with status 2.
+
+A lock-in curve (an Asylum AM curve .ibw, or a trace with amplitude_m/phase_rad and no
+deflection) gets the curve diagnosis instead (afmlearn.curves.analyze.analyze_curve, as
+scripts/analyze_curves.py): <out_dir>/report.json and the curve figures;
+`+curves.max_nfev=...` etc. set the CurveDiagnoser.
 """
 
 from __future__ import annotations
@@ -22,13 +27,29 @@ from _cli import bad_input_exits
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
+from afmlearn.curves import CurveDiagnoser
+from afmlearn.curves.analyze import analyze_curve, is_curve_file
 from afmlearn.diagnose.report import diagnose_trace
+from afmlearn.plots.curves import curve_figures
 from afmlearn.plots.diagnose import plot_all
 
 
 @hydra.main(config_path="../conf", config_name="diagnose", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.diagnose.report.diagnose_trace` and print the verdict."""
+    if is_curve_file(cfg.trace):
+        with bad_input_exits(ValueError, OSError):
+            curves = cfg.get("curves")
+            rep = analyze_curve(cfg.trace, cfg.out_dir, index=cfg.row or 0,
+                                diagnoser=CurveDiagnoser(**curves) if curves else None,
+                                figures=curve_figures if cfg.figures else None)
+        print(f"cause        {rep['cause']}  (confidence {rep['confidence']:.2f})")
+        print(f"gain         {rep['gain']:.3f}  (held-out NRMSE, retraction "
+              f"{rep['baseline']['heldout_nrmse']:.4g} -> {rep['extended']['heldout_nrmse']:.4g})")
+        print(f"baseline     {rep['baseline']['equation']}")
+        print(f"extended     {rep['extended']['equation']}")
+        print(f"report       {cfg.out_dir}/report.json")
+        return
     with bad_input_exits(ValueError):  # InputError, TraceFormatError, bad settings
         diagnoser = instantiate(cfg.diagnoser)
         rep = diagnose_trace(cfg.trace, cfg.out_dir, row=cfg.row, diagnoser=diagnoser,

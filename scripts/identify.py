@@ -13,6 +13,12 @@ afmlearn.identify.infer.identify_trace; figures from afmlearn.plots.identify); t
 profile-likelihood interval (saying so when the data do not bound it). Bad input (missing
 calibration, fewer than 20 samples per drive period, clipped signal, NaN, not a trace file, a
 sweep without `row`) prints `error: ...` and exits with status 2.
+
+A lock-in curve (an Asylum AM curve .ibw, or a trace with amplitude_m/phase_rad and no
+deflection) gets the curve analysis instead (afmlearn.curves.analyze.identify_curve): the
+baseline law fitted to the approach, <out_dir>/result.json with its equation and held-out
+error on the retraction, and the curve figures; `+curves.max_nfev=...` etc. set the
+CurveDiagnoser.
 """
 
 from __future__ import annotations
@@ -22,14 +28,27 @@ from _cli import bad_input_exits
 from hydra.utils import instantiate
 from omegaconf import DictConfig
 
+from afmlearn.curves import CurveDiagnoser
+from afmlearn.curves.analyze import identify_curve, is_curve_file
 from afmlearn.identify.infer import identify_trace
 from afmlearn.identify.joint_outputs import format_exponent
+from afmlearn.plots.curves import curve_figures
 from afmlearn.plots.identify import identify_figures
 
 
 @hydra.main(config_path="../conf", config_name="identify", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.identify.infer.identify_trace` and print the equation."""
+    if is_curve_file(cfg.trace):
+        with bad_input_exits(ValueError, OSError):
+            curves = cfg.get("curves")
+            res = identify_curve(cfg.trace, cfg.out_dir, index=cfg.row or 0,
+                                 diagnoser=CurveDiagnoser(**curves) if curves else None,
+                                 figures=curve_figures if cfg.figures else None)
+        print(res["equation"])
+        print(f"held-out NRMSE (retraction)     {res['heldout_nrmse']:.4g}")
+        print(f"wrote {cfg.out_dir}/result.json")
+        return
     with bad_input_exits(ValueError):  # InputError, TraceFormatError, bad settings
         identifier = instantiate(cfg.identifier)
         result = identify_trace(cfg.trace, cfg.out_dir, row=cfg.row, identifier=identifier,

@@ -222,7 +222,8 @@ def _dense(y0, y1, k1, k7, r5, hs, s):
 
 
 @njit(cache=True, error_model="numpy")
-def integrate_adaptive(law, gap, h, amp0, phi0, q, omega, drive, gx, gw, tol, max_step):
+def integrate_adaptive(law, gap, h, amp0, phi0, q, omega, drive, gx, gw, tol, max_step,
+                       min_step):
     """The slow flow of :func:`integrate` with Dormand--Prince 5(4) steps of controlled error.
 
     The rest gap is the grid ``gap[k]`` at ``tau_k = k h``, linear in between; the steps are
@@ -237,6 +238,12 @@ def integrate_adaptive(law, gap, h, amp0, phi0, q, omega, drive, gx, gw, tol, ma
         Local error per step (> 0).
     max_step : float
         Longest step (dimensionless time, > 0).
+    min_step : float
+        Shortest step: a step this short is accepted whatever its error estimate. The averaged
+        rates jump where the adhesion neck switches on (``d - A = a0``); a state sliding along
+        that switch would otherwise be chased with ever shorter steps (measured: 5e6 steps,
+        100 s, for one curve). There the result is a fixed-step solution of that step, as the
+        RK4 reference's 256 sub-steps are.
 
     Returns
     -------
@@ -290,7 +297,7 @@ def integrate_adaptive(law, gap, h, amp0, phi0, q, omega, drive, gx, gw, tol, ma
         err = max(abs(ea), abs(ep)) / tol
         if not math.isfinite(err):
             err = 1e10
-        if err <= 1.0 or hs <= 1e-6 * h:
+        if err <= 1.0 or hs <= min_step:
             t1 = t + hs
             # grid points in (t, t1]: the continuous extension of the step
             r5a = hs * (_D1 * ka + _D3 * k3a + _D4 * k4a + _D5 * k5a + _D6 * k6a + _D7 * k7a)
@@ -305,5 +312,5 @@ def integrate_adaptive(law, gap, h, amp0, phi0, q, omega, drive, gx, gw, tol, ma
             fac = 5.0 if err < 1e-10 else min(5.0, 0.9 * err ** -0.2)
         else:
             fac = max(0.2, 0.9 * err ** -0.2)
-        step = min(hs * fac, max_step)
+        step = max(min(hs * fac, max_step), min_step)
     return amp, phi, nsteps

@@ -16,7 +16,7 @@ from simulator.lockin import LockIn
 from .curve import Curve
 from .diagnose import CurveDiagnoser
 
-__all__ = ["analyze_curve", "analyze_folder", "load_curve"]
+__all__ = ["analyze_curve", "analyze_folder", "identify_curve", "is_curve_file", "load_curve"]
 
 log = logging.getLogger(__name__)
 
@@ -51,9 +51,67 @@ def load_curve(path: str | os.PathLike[str], *, index: int = 0) -> tuple[Curve, 
     return curve, lockin
 
 
+def is_curve_file(path: str | os.PathLike[str]) -> bool:
+    """True when ``path`` holds lock-in curves without a deflection record (an Asylum AM curve
+    ``.ibw``, a trace file with ``amplitude_m``/``phase_rad`` and no ``deflection_m``).
+
+    False for anything else, including files that cannot be read (the caller's own reader then
+    reports what is wrong with them).
+    """
+    p = Path(path)
+    if not p.is_file():
+        return False
+    try:
+        traces = open_traces(p) if is_instrument_file(p) else [read_trace(p)]
+    except (ValueError, OSError):
+        return False
+    return bool(traces) and all(t.is_curves and t.deflection_m is None for t in traces)
+
+
+def identify_curve(trace: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
+                   diagnoser: CurveDiagnoser | None = None, index: int = 0,
+                   figures: Callable[[CurveDiagnoser, Path], list[Path]] | None = None
+                   ) -> dict[str, Any]:
+    """Fit the baseline law alone to one curve's approach; write ``<out_dir>/result.json``.
+
+    What ``scripts/identify.py`` does with a lock-in curve: the equation of the tip--sample
+    law (VdW--DMT sphere, :class:`CurveFitter` through a :class:`CurveDiagnoser` without
+    hypotheses), its held-out error on the retraction, and figures.
+
+    Parameters
+    ----------
+    trace, out_dir, index, figures
+        As :func:`analyze_curve`.
+    diagnoser : CurveDiagnoser, optional
+        Settings; its ``hypotheses`` are ignored (none are fitted).
+
+    Returns
+    -------
+    dict
+        ``equation`` (SI: nN, nm), ``parameters`` (dimensionless fitted values),
+        ``heldout_nrmse`` (retraction), ``chi2``, ``n_fit``, ``curve`` (as the report's),
+        ``figures``, ``input``.
+    """
+    diag = diagnoser if diagnoser is not None else CurveDiagnoser()
+    diag.hypotheses = ()
+    rep = analyze_curve(trace, out_dir, diagnoser=diag, index=index, figures=figures,
+                        filename="result.json", build=_identify_result)
+    return rep
+
+
+def _identify_result(diag: CurveDiagnoser) -> dict[str, Any]:
+    rep = diag.report()
+    base = rep["baseline"]
+    return {"equation": base["equation"], "parameters": base["parameters"],
+            "heldout_nrmse": base["heldout_nrmse"], "chi2": base["chi2"],
+            "n_fit": base["n_fit"], "curve": rep["curve"], "figures": []}
+
+
 def analyze_curve(trace: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
                   diagnoser: CurveDiagnoser | None = None, index: int = 0,
-                  figures: Callable[[CurveDiagnoser, Path], list[Path]] | None = None
+                  figures: Callable[[CurveDiagnoser, Path], list[Path]] | None = None,
+                  filename: str = "report.json",
+                  build: Callable[[CurveDiagnoser], dict[str, Any]] | None = None
                   ) -> dict[str, Any]:
     """Diagnose one curve and write ``<out_dir>/report.json`` (and figures).
 
@@ -69,6 +127,10 @@ def analyze_curve(trace: str | os.PathLike[str], out_dir: str | os.PathLike[str]
         Curve of a file holding several.
     figures : callable, optional
         ``figures(fitted_diagnoser, out_dir) -> paths`` (``afmlearn.plots.curves``).
+    filename : str
+        Name of the JSON file written in ``out_dir``.
+    build : callable, optional
+        ``build(fitted_diagnoser) -> dict``: the record to write (default: its report).
 
     Returns
     -------
@@ -80,15 +142,14 @@ def analyze_curve(trace: str | os.PathLike[str], out_dir: str | os.PathLike[str]
     if lockin is not None:
         diag.lockin = lockin
     diag.fit(curve)
-    report = diag.report()
+    report = diag.report() if build is None else build(diag)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if figures is not None:
         report["figures"] = [os.path.relpath(f, out) for f in figures(diag, out)]
     report["input"] = Path(trace).name
-    write_json(out / "report.json", report)
-    log.info("%s: cause %s (confidence %.2f, gain %.3f)", Path(trace).name, report["cause"],
-             report["confidence"], report["gain"])
+    write_json(out / filename, report)
+    log.info("%s: %s written", Path(trace).name, out / filename)
     return report
 
 

@@ -66,6 +66,9 @@ class SlowFlowModel:
     max_step : float
         Longest adaptive step (dimensionless time), in units of ``2Q`` (the lever's amplitude
         time constant).
+    min_step : float
+        Shortest adaptive step, in units of ``step``: accepted whatever its error (bounds the
+        cost where the averaged rates jump, at the adhesion neck's switch).
 
     Attributes
     ----------
@@ -76,11 +79,12 @@ class SlowFlowModel:
     def __init__(self, *, quality_factor: float, omega: float, drive: float,
                  lockin: LockIn | None = None, step: float = 2.0 * math.pi,
                  max_turn: float = 0.25, settle: float = 3.0,
-                 tolerance: float | None = 1e-7, max_step: float = 2.0) -> None:
+                 tolerance: float | None = 1e-7, max_step: float = 2.0,
+                 min_step: float = 1.0 / 16.0) -> None:
         for name, v in (("quality_factor", quality_factor), ("omega", omega),
                         ("drive", drive), ("step", step), ("max_turn", max_turn),
-                        ("max_step", max_step), ("tolerance", 1.0 if tolerance is None
-                                                 else tolerance)):
+                        ("max_step", max_step), ("min_step", min_step),
+                        ("tolerance", 1.0 if tolerance is None else tolerance)):
             if not (math.isfinite(float(v)) and float(v) > 0.0):
                 raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
         self.quality_factor = float(quality_factor)
@@ -92,6 +96,7 @@ class SlowFlowModel:
         self.settle = float(settle)
         self.tolerance = None if tolerance is None else float(tolerance)
         self.max_step = float(max_step)
+        self.min_step = float(min_step)
         self.n_steps_ = 0
 
     @classmethod
@@ -138,7 +143,7 @@ class SlowFlowModel:
             amp, phi, self.n_steps_ = _kernel.integrate_adaptive(
                 law.vector(), g, h, a0, p0, self.quality_factor, self.omega, self.drive,
                 _kernel._GL_X, _kernel._GL_W, self.tolerance,
-                self.max_step * 2.0 * self.quality_factor)
+                self.max_step * 2.0 * self.quality_factor, h * self.min_step)
         iq = np.stack([amp * np.cos(phi), amp * np.sin(phi)])
         if self.lockin is not None:
             iq = self.lockin.filter(iq, dt=h)
