@@ -96,6 +96,9 @@ class AbstractHypothesis(abc.ABC):
     explanation: ClassVar[str] = ""
     #: equation-error solutions handed to the output-error stage as starts
     n_starts: ClassVar[int] = 3
+    #: how far ``a0`` may move from the model this extends (factor, > 1): a sphere baseline
+    #: compensates a cone by a far-off ``a0`` (measured: base 0.0089 L_ref, true 0.0277)
+    a0_factor: ClassVar[float] = 3.0
 
     @abc.abstractmethod
     def parameters(self, ctx: Context) -> list[Parameter]:
