@@ -5,10 +5,14 @@ Examples
     python scripts/analyze_curves.py trace=outputs/curve.h5 out_dir=outputs/curves
     python scripts/analyze_curves.py trace=AZ_0052.ibw out_dir=out     # an Asylum file
     python scripts/analyze_curves.py trace=On_Surface/ out_dir=out     # every file of a folder
+    python scripts/analyze_curves.py trace=asylum/ out_dir=out time_limit_s=120  # resumable
 
 Writes <out_dir>/report.json (design.md section 3 keys plus `curve`: free amplitude, surface
 position, dissipated energy, adhesion) and figures (afmlearn.plots.curves). The file's /labels
-group is never read. Bad input prints `error: ...` (one line) and exits with status 2.
+group is never read. A folder (searched recursively) runs each curve in a child process under
+`time_limit_s` (a timeout or crash is listed, never stops the batch) and skips curves whose
+report.json exists (`resume=false` redoes them). Bad input prints `error: ...` (one line)
+and exits with status 2.
 """
 
 from __future__ import annotations
@@ -34,7 +38,8 @@ def main(cfg: DictConfig) -> None:
                                      make_diagnoser=lambda: instantiate(cfg.diagnoser),
                                      figures=figures,
                                      summary_figure=plot_parameter_spread if cfg.figures
-                                     else None)
+                                     else None, time_limit_s=cfg.time_limit_s,
+                                     resume=cfg.resume)
             print(f"causes: {summary['causes']} ({summary['n_analysed']} of "
                   f"{summary['n_files']} files)")
             print(f"wrote {cfg.out_dir}/summary.json")

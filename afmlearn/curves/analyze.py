@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import math
+import multiprocessing as mp
 import os
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -157,39 +160,121 @@ def analyze_folder(folder: str | os.PathLike[str], out_dir: str | os.PathLike[st
                    make_diagnoser: Callable[[], CurveDiagnoser] = CurveDiagnoser,
                    figures: Callable[[CurveDiagnoser, Path], list[Path]] | None = None,
                    summary_figure: Callable[[list[dict], Path], Path] | None = None,
+                   time_limit_s: float | None = None, resume: bool = True
                    ) -> dict[str, Any]:
-    """Every curve file of ``folder`` (sorted): ``<out_dir>/<stem>/report.json`` each and
-    ``<out_dir>/summary.json`` (cause counts, gains, fitted parameters per curve).
+    """Every curve file under ``folder`` (recursively, sorted): ``<out_dir>/<relative path
+    without suffix>/report.json`` each and ``<out_dir>/summary.json`` (cause counts, gains,
+    fitted parameters, time per curve).
 
-    A file that cannot be analysed is listed with its one-line error, never aborts the batch.
+    Each curve runs in a child process (forked) under ``time_limit_s``: a file that cannot be
+    analysed, crashes its process or runs out of time is listed with its one-line error
+    (``timeout after ... s``), never aborts or hangs the batch. With ``resume``, a curve whose
+    ``report.json`` exists is read back, not analysed again (a killed batch continues).
+
+    Parameters
+    ----------
+    time_limit_s : float or None
+        Wall-clock limit per curve [s] (None: no limit, run in this process).
+    resume : bool
+        Reuse existing reports.
+
+    Rows carry ``file`` (relative path), ``group`` (its folder relative to ``folder``),
+    ``seconds`` (wall clock of the analysis) and ``load`` (1-minute load average at its
+    start) besides the report's numbers.
     """
     folder = Path(folder)
-    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix in (".h5", ".ibw"))
+    files = sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix in (".h5", ".ibw"))
     if not files:
         raise ValueError(f"trace: no .h5 or .ibw files in {folder}")
+    if time_limit_s is not None and not time_limit_s > 0:
+        raise ValueError(f"time_limit_s must be > 0 or None, got {time_limit_s!r}")
     out = Path(out_dir)
     rows: list[dict[str, Any]] = []
     for p in files:
-        try:
-            rep = analyze_curve(p, out / p.stem, diagnoser=make_diagnoser(), figures=figures)
-        except ValueError as err:
-            rows.append({"file": p.name, "error": str(err).splitlines()[0]})
-            continue
-        ext = rep["extended"]["parameters"]
-        rows.append({"file": p.name, "cause": rep["cause"], "gain": rep["gain"],
-                     "confidence": rep["confidence"],
-                     "free_amplitude_m": rep["curve"]["free_amplitude_m"],
-                     "adhesion_force_n": rep["curve"]["adhesion_force_n"],
-                     "heldout_nrmse_baseline": rep["baseline"]["heldout_nrmse"],
-                     "heldout_nrmse_extended": rep["extended"]["heldout_nrmse"],
-                     "parameters": ext})
-    done = [r for r in rows if "cause" in r]
-    causes = sorted({r["cause"] for r in done})
-    summary = {"n_files": len(files), "n_analysed": len(done),
-               "causes": {c: sum(r["cause"] == c for r in done) for c in causes},
+        rel = p.relative_to(folder)
+        sub = out / rel.with_suffix("")
+        row: dict[str, Any] = {"file": rel.as_posix(), "group": rel.parent.as_posix()}
+        done = sub / "report.json"
+        if not (resume and done.is_file()):
+            if (sub / "error.json").is_file() and resume:
+                rows.append({**row, **json.loads((sub / "error.json").read_text())})
+                continue
+            err = _run_one(p, sub, make_diagnoser, figures, time_limit_s)
+            if err is not None:
+                rec = {"error": err}
+                sub.mkdir(parents=True, exist_ok=True)
+                write_json(sub / "error.json", rec)
+                rows.append({**row, **rec})
+                log.warning("%s: %s", rel, err)
+                continue
+        rep = json.loads(done.read_text())
+        rows.append({**row, **_row(rep)})
+    ok = [r for r in rows if "cause" in r]
+    causes = sorted({r["cause"] for r in ok})
+    summary = {"n_files": len(files), "n_analysed": len(ok),
+               "causes": {c: sum(r["cause"] == c for r in ok) for c in causes},
                "curves": rows, "figures": []}
     out.mkdir(parents=True, exist_ok=True)
-    if summary_figure is not None and done:
-        summary["figures"] = [os.path.relpath(summary_figure(done, out), out)]
+    if summary_figure is not None and ok:
+        summary["figures"] = [os.path.relpath(summary_figure(ok, out), out)]
     write_json(out / "summary.json", summary)
     return summary
+
+
+def _row(rep: dict[str, Any]) -> dict[str, Any]:
+    """The numbers of one report that the folder summary lists."""
+    return {"cause": rep["cause"], "gain": rep["gain"], "confidence": rep["confidence"],
+            "free_amplitude_m": rep["curve"]["free_amplitude_m"],
+            "adhesion_force_n": rep["curve"]["adhesion_force_n"],
+            "heldout_nrmse_baseline": rep["baseline"]["heldout_nrmse"],
+            "heldout_nrmse_extended": rep["extended"]["heldout_nrmse"],
+            "parameters": rep["extended"]["parameters"],
+            "baseline_parameters": rep["baseline"]["parameters"],
+            "seconds": rep.get("seconds"), "load": rep.get("load")}
+
+
+def _analyze_timed(path: Path, sub: Path, make_diagnoser, figures) -> None:
+    """``analyze_curve`` plus its wall-clock time and the load average in the report."""
+    load = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    rep = analyze_curve(path, sub, diagnoser=make_diagnoser(), figures=figures)
+    rep["seconds"] = time.perf_counter() - t0
+    rep["load"] = load
+    write_json(sub / "report.json", rep)
+
+
+def _child(path, sub, make_diagnoser, figures, conn) -> None:  # pragma: no cover (child)
+    try:
+        _analyze_timed(path, sub, make_diagnoser, figures)
+        conn.send(None)
+    except Exception as err:  # noqa: BLE001 - any failure of one curve is recorded, not raised
+        conn.send(f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}")
+
+
+def _run_one(path: Path, sub: Path, make_diagnoser, figures, time_limit_s) -> str | None:
+    """Analyse one curve (in a child process under the time limit); the error line or None."""
+    if time_limit_s is None:
+        try:
+            _analyze_timed(path, sub, make_diagnoser, figures)
+        except ValueError as err:
+            return str(err).splitlines()[0]
+        return None
+    ctx = mp.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(path, sub, make_diagnoser, figures, send))
+    proc.start()
+    send.close()
+    try:
+        if recv.poll(time_limit_s):
+            msg = recv.recv()
+            proc.join(10.0)
+            return msg
+        return f"timeout after {time_limit_s:g} s"
+    except EOFError:
+        proc.join(10.0)
+        return f"the analysis process died (exit code {proc.exitcode})"
+    finally:
+        if proc.is_alive():
+            proc.kill()
+        proc.join()
+        recv.close()

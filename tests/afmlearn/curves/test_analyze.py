@@ -1,0 +1,70 @@
+"""The folder batch: a bad file, a crash and a timeout are recorded, never stop it; a second
+run resumes from the reports already written."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+
+from afmlearn.curves import EXTENSIONS, CurveDiagnoser
+from afmlearn.curves.analyze import analyze_folder
+from afmlearn.simulate import simulate
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory) -> Path:
+    """good/a.h5, good/b.h5 (a simulated curve) and bad/junk.h5 (not HDF5)."""
+    base = tmp_path_factory.mktemp("batch")
+    (base / "good").mkdir()
+    (base / "bad").mkdir()
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose("simulate", overrides=["scenario=lockin", "scenario.n_periods=400",
+                                             "excitation.free_amplitude_ratio=1.5",
+                                             "progress=false", f"output={base}/good/a.h5"])
+    simulate(cfg)
+    shutil.copy(base / "good" / "a.h5", base / "good" / "b.h5")
+    (base / "bad" / "junk.h5").write_bytes(b"not an hdf5 file")
+    return base
+
+
+def quick() -> CurveDiagnoser:
+    return CurveDiagnoser(hypotheses=EXTENSIONS[:1], max_nfev=2)
+
+
+def test_batch_records_errors_and_resumes(folder, tmp_path):
+    out = tmp_path / "out"
+    s1 = analyze_folder(folder, out, make_diagnoser=quick, time_limit_s=300)
+    rows = {r["file"]: r for r in s1["curves"]}
+    assert set(rows) == {"bad/junk.h5", "good/a.h5", "good/b.h5"}
+    assert "error" in rows["bad/junk.h5"] and rows["bad/junk.h5"]["group"] == "bad"
+    assert s1["n_analysed"] == 2 and rows["good/a.h5"]["seconds"] > 0
+    # identical files, identical fits (the child process is deterministic)
+    assert rows["good/a.h5"]["heldout_nrmse_baseline"] == rows["good/b.h5"][
+        "heldout_nrmse_baseline"]
+    report = out / "good" / "a" / "report.json"
+    stamp = report.stat().st_mtime_ns
+    s2 = analyze_folder(folder, out, make_diagnoser=quick, time_limit_s=300)
+    assert report.stat().st_mtime_ns == stamp  # read back, not redone
+    assert json.dumps(s2["curves"]) == json.dumps(s1["curves"])
+
+
+def test_batch_records_a_timeout_and_a_crash(folder, tmp_path):
+    s = analyze_folder(folder / "good", tmp_path / "t", make_diagnoser=quick,
+                       time_limit_s=0.05)
+    assert all(r["error"] == "timeout after 0.05 s" for r in s["curves"])
+
+    def crash() -> CurveDiagnoser:
+        raise RuntimeError("boom")
+
+    s = analyze_folder(folder / "good", tmp_path / "c", make_diagnoser=crash, time_limit_s=60)
+    assert all(r["error"] == "RuntimeError: boom" for r in s["curves"])
+    with pytest.raises(ValueError, match="time_limit_s"):
+        analyze_folder(folder, tmp_path / "x", time_limit_s=0.0)
