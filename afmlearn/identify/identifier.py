@@ -34,6 +34,7 @@ from afmlearn.preprocess import Calibrated, calibrate, check_trace
 from .constraints import CalibrationConstraints
 from .drive import AbstractDrivePhase
 from .joint import (
+    DEFAULT_OUTPUT_ERROR,
     Bagging,
     ContactOnsetProfile,
     ExponentProfile,
@@ -42,6 +43,7 @@ from .joint import (
     SupportSelection,
 )
 from .library import AFMLibrary
+from .output_error import OutputErrorStage
 from .projection import AbstractProjection, HarmonicBalance
 from .single import (
     DrivePhaseChoice,
@@ -121,6 +123,10 @@ class ForceIdentifier:
         elsewhere) or :class:`FittedPhase` (always fitted).
     exponent_profile : ExponentProfile, optional
         Range and steps of the contact exponent's profile likelihood in a joint fit.
+    output_error : OutputErrorStage or None
+        The joint fit's output-error stage (default ``OutputErrorStage()``: the law's own
+        periodic orbits against every observation's harmonics); None: the equation-error
+        law with bootstrap bands and :class:`ExponentProfile`.
     seed : int
         Seed of the bootstrap.
     progress : bool
@@ -172,6 +178,7 @@ class ForceIdentifier:
                  a0_range_m: tuple[float, float] | None = (0.1e-9, 3.0e-9),
                  drive_phase: AbstractDrivePhase | None = None,
                  exponent_profile: ExponentProfile | None = None,
+                 output_error: OutputErrorStage | None = DEFAULT_OUTPUT_ERROR,
                  seed: int = 0, progress: bool = False) -> None:
         self.library = library
         self.projection = projection
@@ -192,6 +199,7 @@ class ForceIdentifier:
         self.a0_range_m = a0_range_m
         self.drive_phase = drive_phase
         self.exponent_profile = exponent_profile
+        self.output_error = output_error
         self.seed = seed
         self.progress = progress
 
@@ -210,6 +218,10 @@ class ForceIdentifier:
                                                                 ExponentProfile):
             raise ValueError(f"exponent_profile must be an ExponentProfile, "
                              f"got {self.exponent_profile!r}")
+        if self.output_error is not None and not isinstance(self.output_error,
+                                                            OutputErrorStage):
+            raise ValueError(f"output_error must be an OutputErrorStage or None, "
+                             f"got {self.output_error!r}")
         if not (isinstance(self.n_folds, int) and self.n_folds >= 2):
             raise ValueError(f"n_folds must be an integer >= 2, got {self.n_folds!r}")
         if self.a0_range_m is not None:
@@ -274,7 +286,8 @@ class ForceIdentifier:
                         refinement=Refinement() if self.refine else None,
                         bagging=Bagging(n_bootstrap=self.n_bootstrap, seed=self.seed),
                         exponent=self.exponent_profile or ExponentProfile(),
-                        offsets=OrbitOffsets(), log=self._log)
+                        offsets=OrbitOffsets(), output_error=self.output_error,
+                        log=self._log)
         n_lin = res.problem.n_lin
         bands = (None if res.samples.shape[0] < 5
                  else np.percentile(res.samples[:, n_lin:], [2.5, 97.5], axis=0))

@@ -167,6 +167,7 @@ def test_force_vs_gap_splits_approach_and_retraction():
 @pytest.mark.parametrize("kw", [dict(n_folds=1), dict(heldout_fraction=0.9), dict(n_a0=2),
                                 dict(n_bootstrap=-1), dict(substeps=0),
                                 dict(library="dmt"), dict(projection="weak"),
+                                dict(output_error="on"),
                                 dict(a0_range_m=(3e-9, 1e-9)), dict(a0_range_m=(0.0, 1e-9)),
                                 dict(a0_range_m=(1e-10, float("inf")))])
 def test_bad_settings_raise(kw, lj_trace):
