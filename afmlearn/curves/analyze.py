@@ -12,6 +12,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from afmlearn.io import read_trace, write_json
 from afmlearn.io.instruments import is_instrument_file, open_traces
 from simulator.lockin import LockIn
@@ -146,6 +148,9 @@ def analyze_curve(trace: str | os.PathLike[str], out_dir: str | os.PathLike[str]
         diag.lockin = lockin
     diag.fit(curve)
     report = diag.report() if build is None else build(diag)
+    report["curve"].update(spring_constant_n_per_m=curve.spring_constant_n_per_m,
+                           resonance_frequency_hz=curve.resonance_frequency_hz,
+                           quality_factor=curve.quality_factor)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if figures is not None:
@@ -210,9 +215,9 @@ def analyze_folder(folder: str | os.PathLike[str], out_dir: str | os.PathLike[st
         rep = json.loads(done.read_text())
         rows.append({**row, **_row(rep)})
     ok = [r for r in rows if "cause" in r]
-    causes = sorted({r["cause"] for r in ok})
-    summary = {"n_files": len(files), "n_analysed": len(ok),
-               "causes": {c: sum(r["cause"] == c for r in ok) for c in causes},
+    summary = {"n_files": len(files), "n_analysed": len(ok), **group_summary(rows),
+               "groups": {g: group_summary([r for r in rows if r["group"] == g])
+                          for g in sorted({r["group"] for r in rows})},
                "curves": rows, "figures": []}
     out.mkdir(parents=True, exist_ok=True)
     if summary_figure is not None and ok:
@@ -221,11 +226,46 @@ def analyze_folder(folder: str | os.PathLike[str], out_dir: str | os.PathLike[st
     return summary
 
 
+def group_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Consistency of a group of curves (``analyze_folder`` rows).
+
+    Returns
+    -------
+    dict
+        ``n``; ``errors`` (timeouts, crashes, unreadable files); ``causes`` (counts);
+        ``majority`` (the most frequent cause) and ``agreement`` (its fraction of the analysed
+        curves); ``n_named`` (curves with a cause), ``gain_positive`` (fraction of those whose
+        extended model predicts the retraction better than the baseline), ``median_gain``
+        (over them); ``seconds`` (median, max wall clock per curve) and ``load`` (median
+        1-minute load average during the runs).
+    """
+    ok = [r for r in rows if "cause" in r]
+    causes: dict[str, int] = {}
+    for r in ok:
+        causes[r["cause"]] = causes.get(r["cause"], 0) + 1
+    majority = max(sorted(causes), key=lambda c: causes[c]) if causes else None
+    named = [r for r in ok if r["cause"] != "none"]
+    gains = np.array([r["gain"] for r in named], dtype=float)
+    secs = np.array([r["seconds"] for r in ok if r.get("seconds") is not None], dtype=float)
+    loads = np.array([r["load"] for r in ok if r.get("load") is not None], dtype=float)
+    return {"n": len(rows), "errors": len(rows) - len(ok), "causes": causes,
+            "majority": majority,
+            "agreement": causes[majority] / len(ok) if ok else float("nan"),
+            "n_named": len(named),
+            "gain_positive": float(np.mean(gains > 0)) if named else float("nan"),
+            "median_gain": float(np.median(gains)) if named else float("nan"),
+            "seconds": ([float(np.median(secs)), float(np.max(secs))] if secs.size
+                        else None),
+            "load": float(np.median(loads)) if loads.size else None}
+
+
 def _row(rep: dict[str, Any]) -> dict[str, Any]:
     """The numbers of one report that the folder summary lists."""
     return {"cause": rep["cause"], "gain": rep["gain"], "confidence": rep["confidence"],
             "free_amplitude_m": rep["curve"]["free_amplitude_m"],
             "adhesion_force_n": rep["curve"]["adhesion_force_n"],
+            "spring_constant_n_per_m": rep["curve"].get("spring_constant_n_per_m"),
+            "resonance_frequency_hz": rep["curve"].get("resonance_frequency_hz"),
             "heldout_nrmse_baseline": rep["baseline"]["heldout_nrmse"],
             "heldout_nrmse_extended": rep["extended"]["heldout_nrmse"],
             "parameters": rep["extended"]["parameters"],

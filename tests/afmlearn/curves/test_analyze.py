@@ -68,3 +68,18 @@ def test_batch_records_a_timeout_and_a_crash(folder, tmp_path):
     assert all(r["error"] == "RuntimeError: boom" for r in s["curves"])
     with pytest.raises(ValueError, match="time_limit_s"):
         analyze_folder(folder, tmp_path / "x", time_limit_s=0.0)
+
+
+def test_group_summary_counts_agreement_and_gains():
+    from afmlearn.curves.analyze import group_summary
+
+    rows = ([{"cause": "long_range_damping", "gain": g, "seconds": 10.0, "load": 2.0}
+             for g in (0.1, 0.3, -0.05)]
+            + [{"cause": "none", "gain": 0.0, "seconds": 30.0, "load": 4.0},
+               {"error": "timeout after 30 s"}])
+    s = group_summary(rows)
+    assert s["n"] == 5 and s["errors"] == 1
+    assert s["majority"] == "long_range_damping" and s["agreement"] == pytest.approx(0.75)
+    assert s["n_named"] == 3 and s["gain_positive"] == pytest.approx(2 / 3)
+    assert s["median_gain"] == pytest.approx(0.1)
+    assert s["seconds"] == [10.0, 30.0] and s["load"] == 2.0
