@@ -4,7 +4,11 @@ refitted there (issue 14, part 3: data not fitted)."""
 
 from __future__ import annotations
 
+import logging
 import math
+import os
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,17 +22,19 @@ from .fit import OFFSET, OMEGA, wrap_phase
 from .law import CurveLaw
 from .model import SlowFlowModel
 
-__all__ = ["law_from_parameters", "rescale_law", "transfer_nrmse"]
+log = logging.getLogger(__name__)
+
+__all__ = ["law_from_parameters", "rescale_law", "transfer_gains", "transfer_nrmse"]
 
 #: law fields that are lengths (scale with 1 / length unit)
 _LENGTHS = ("a0", "decay_length", "radius", "neck")
 
 
-def law_from_parameters(values: dict[str, float], curve: Curve, *, a0_m: float = 0.3e-9,
+def law_from_parameters(values: dict[str, float], length_m: float, *, a0_m: float = 0.3e-9,
                         tip_radius_m: float = 10e-9) -> CurveLaw:
-    """The :class:`CurveLaw` of a report's fitted ``parameters`` on ``curve`` (dimensionless in
-    its free amplitude; ``a0`` and the radius as the fitter holds them, SI in metres)."""
-    base = CurveLaw(a0=a0_m / curve.length_m, radius=tip_radius_m / curve.length_m)
+    """The :class:`CurveLaw` of a report's fitted ``parameters`` on a curve of free amplitude
+    ``length_m`` [m] (its length unit; ``a0`` and the radius as the fitter holds them, SI)."""
+    base = CurveLaw(a0=a0_m / length_m, radius=tip_radius_m / length_m)
     fields = set(base.parameters())
     return base.replace(**{k: float(v) for k, v in values.items() if k in fields})
 
@@ -117,3 +123,75 @@ def transfer_nrmse(law: CurveLaw, source_length_m: float, curve: Curve, *,
     return {"nrmse": heldout_nrmse(fixed, curve, every),
             "nrmse_retraction": heldout_nrmse(fixed, curve, curve.segment == 1),
             OFFSET: float(res.x[0]), OMEGA: float(res.x[1])}
+
+
+def transfer_gains(summary: dict[str, Any], folder: str | os.PathLike[str], *,
+                   n_sources: int = 4, n_targets: int = 4, group: str | None = None,
+                   step: float = 4.0 * math.pi,
+                   load: Callable[[Path], tuple[Curve, LockIn | None]] | None = None
+                   ) -> dict[str, Any]:
+    """Gain on other curves: each source curve's baseline and extended laws predict whole
+    curves of the same tip at other free amplitudes.
+
+    Parameters
+    ----------
+    summary : dict
+        ``analyze_folder``'s summary (rows with ``file``, ``group``, ``cause``,
+        ``free_amplitude_m``, ``parameters`` and ``baseline_parameters``).
+    folder : path
+        The folder the rows' ``file`` are relative to.
+    n_sources, n_targets : int
+        Sources: curves with a named cause, spread over the free amplitudes; targets: the
+        other curves of the same group spread over the free amplitudes.
+    group : str or None
+        Only this group (default: every group).
+    load : callable
+        ``load(path) -> (curve, lockin)`` (default :func:`afmlearn.curves.analyze.load_curve`).
+
+    Returns
+    -------
+    dict
+        ``pairs`` (source, target, free amplitudes, cause, NRMSE of both laws on the whole
+        target curve, ``gain = 1 - nrmse_ext / nrmse_base``), ``median_gain``,
+        ``gain_positive`` (fraction of pairs).
+    """
+    if load is None:
+        from .analyze import load_curve as load
+    rows = [r for r in summary["curves"] if "cause" in r
+            and (group is None or r["group"] == group)]
+    named = sorted((r for r in rows if r["cause"] != "none"),
+                   key=lambda r: r["free_amplitude_m"])
+    pick = _spread(named, n_sources)
+    pairs = []
+    cache: dict[str, tuple[Curve, LockIn | None]] = {}
+    for src in pick:
+        others = sorted((r for r in rows if r["group"] == src["group"]
+                         and r["file"] != src["file"]), key=lambda r: r["free_amplitude_m"])
+        ls = src["free_amplitude_m"]
+        base = law_from_parameters(src["baseline_parameters"], ls)
+        ext = law_from_parameters(src["parameters"], ls)
+        for tgt in _spread(others, n_targets):
+            if tgt["file"] not in cache:
+                cache[tgt["file"]] = load(Path(folder) / tgt["file"])
+            curve, lockin = cache[tgt["file"]]
+            b = transfer_nrmse(base, ls, curve, lockin=lockin, step=step)
+            e = transfer_nrmse(ext, ls, curve, lockin=lockin, step=step)
+            pairs.append({"source": src["file"], "target": tgt["file"], "cause": src["cause"],
+                          "source_free_amplitude_m": ls,
+                          "target_free_amplitude_m": curve.length_m,
+                          "nrmse_baseline": b["nrmse"], "nrmse_extended": e["nrmse"],
+                          "gain": 1.0 - e["nrmse"] / b["nrmse"] if b["nrmse"] > 0
+                          else float("nan")})
+            log.info("transfer %s -> %s: gain %.3f", src["file"], tgt["file"],
+                     pairs[-1]["gain"])
+    g = np.array([p["gain"] for p in pairs], dtype=float)
+    return {"pairs": pairs, "median_gain": float(np.median(g)) if g.size else float("nan"),
+            "gain_positive": float(np.mean(g > 0)) if g.size else float("nan")}
+
+
+def _spread(rows: list[dict], n: int) -> list[dict]:
+    """``n`` rows evenly spread over a sorted list (all when there are fewer)."""
+    if len(rows) <= n:
+        return list(rows)
+    idx = np.unique(np.round(np.linspace(0, len(rows) - 1, n)).astype(int))
+    return [rows[i] for i in idx]

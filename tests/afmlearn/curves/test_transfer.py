@@ -56,6 +56,25 @@ def test_the_true_law_predicts_another_free_amplitude():
 
 
 def test_law_from_report_parameters():
-    c = synthetic(LAW1, L1, offset=0.0)
-    law = law_from_parameters({"offset": 1.0, "omega": 1.0, "vdw": 3e-6, "damping": 1e-3}, c)
+    law = law_from_parameters({"offset": 1.0, "omega": 1.0, "vdw": 3e-6, "damping": 1e-3}, L1)
     assert law.vdw == 3e-6 and law.damping == 1e-3 and law.a0 == pytest.approx(0.3e-9 / L1)
+
+
+def test_transfer_gains_of_the_true_extension_are_positive():
+    """Curves of one tip at 20, 30 and 45 nm made with long-range damping: the law with the
+    damping predicts the other curves better than the same law without it."""
+    from afmlearn.curves.transfer import transfer_gains
+
+    lengths = {"g/a": 20e-9, "g/b": 30e-9, "g/c": 45e-9}
+    curves = {k: synthetic(LAW1, v, offset=1.0) for k, v in lengths.items()}
+    rows = []
+    for k, v in lengths.items():
+        ext = rescale_law(LAW1, L1 / v).parameters()
+        rows.append({"file": k, "group": "g", "cause": "long_range_damping",
+                     "free_amplitude_m": v, "parameters": ext,
+                     "baseline_parameters": {**ext, "damping": 0.0}})
+    out = transfer_gains({"curves": rows}, "/nowhere", n_sources=2, n_targets=2,
+                         load=lambda p: (curves[f"{p.parent.name}/{p.name}"], None))
+    assert len(out["pairs"]) == 4
+    assert all(p["source"] != p["target"] for p in out["pairs"])
+    assert out["gain_positive"] == 1.0 and out["median_gain"] > 0.5
