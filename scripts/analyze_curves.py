@@ -11,8 +11,9 @@ Writes <out_dir>/report.json (design.md section 3 keys plus `curve`: free amplit
 position, dissipated energy, adhesion) and figures (afmlearn.plots.curves). The file's /labels
 group is never read. A folder (searched recursively) runs each curve in a child process under
 `time_limit_s` (a timeout or crash is listed, never stops the batch) and skips curves whose
-report.json exists (`resume=false` redoes them). Bad input prints `error: ...` (one line)
-and exits with status 2.
+report.json exists (`resume=false` redoes them); `transfer_sources=N` then predicts other
+curves of the same group with N curves' fitted laws (transfer.json: gain on other curves).
+Bad input prints `error: ...` (one line) and exits with status 2.
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig
 
 from afmlearn.curves.analyze import analyze_curve, analyze_folder
+from afmlearn.curves.transfer import transfer_gains
+from afmlearn.io import write_json
 from afmlearn.plots.curves import curve_figures, plot_parameter_spread
 
 
@@ -42,6 +45,17 @@ def main(cfg: DictConfig) -> None:
                                      resume=cfg.resume)
             print(f"causes: {summary['causes']} ({summary['n_analysed']} of "
                   f"{summary['n_files']} files)")
+            for g, gs in summary["groups"].items():
+                print(f"  {g}: {gs['majority']} on {gs['agreement']:.0%}, positive gain on "
+                      f"{gs['gain_positive']:.0%} of {gs['n_named']} named (median "
+                      f"{gs['median_gain']:.3f}), {gs['errors']} errors")
+            if cfg.transfer_sources > 0:
+                tr = transfer_gains(summary, cfg.trace, n_sources=cfg.transfer_sources,
+                                    n_targets=cfg.transfer_targets,
+                                    step=float(cfg.diagnoser.step))
+                write_json(Path(cfg.out_dir) / "transfer.json", tr)
+                print(f"other curves: median gain {tr['median_gain']:.3f}, positive on "
+                      f"{tr['gain_positive']:.0%} of {len(tr['pairs'])} pairs")
             print(f"wrote {cfg.out_dir}/summary.json")
             return
         diagnoser = instantiate(cfg.diagnoser)
