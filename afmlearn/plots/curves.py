@@ -107,19 +107,57 @@ def curve_figures(diag: CurveDiagnoser, out_dir: Path) -> list[Path]:
             plot_curve_dissipation(diag, out / "curve_dissipation.png")]
 
 
+def _si_parameters(row: dict) -> dict[str, float]:
+    """SI values of one row's fitted law (baseline attraction and stiffness, the extension's
+    damping) from its dimensionless parameters and scales (k, f0, free amplitude)."""
+    lu = row["free_amplitude_m"]
+    k = row.get("spring_constant_n_per_m") or float("nan")
+    w0 = 2 * np.pi * (row.get("resonance_frequency_hz") or float("nan"))
+    base = row.get("baseline_parameters", row["parameters"])
+    ext = row["parameters"]
+    out = {"free amplitude [nm]": lu * 1e9,
+           "adhesion, baseline [nN]": row.get("adhesion_force_n", np.nan) * 1e9,
+           "held-out gain": row["gain"] if row["cause"] != "none" else np.nan}
+    # E delta^1.5 in nN / nm^1.5: stiffness * k L / L^1.5
+    out["contact stiffness, baseline [nN/nm^1.5]"] = (base.get("stiffness", np.nan) * k * lu
+                                                      * 1e9 / (lu * 1e9) ** 1.5)
+    if ext.get("damping"):
+        out["long-range damping [N s/m]"] = ext["damping"] * k / w0
+        out["damping decay length [nm]"] = ext["decay_length"] * lu * 1e9
+    return out
+
+
 def plot_parameter_spread(rows: list[dict], out_dir: Path) -> Path:
-    """Histograms of fitted parameters across curves (``analyze_folder`` rows)."""
-    keys = [("adhesion_force_n", 1e9, "adhesion force [nN]"),
-            ("free_amplitude_m", 1e9, "free amplitude [nm]"),
-            ("gain", 1.0, "held-out gain")]
-    fig = Figure(figsize=(10.0, 3.2))
-    axes = fig.subplots(1, len(keys))
-    for ax, (key, scale, label) in zip(axes, keys, strict=True):
-        v = np.array([r[key] for r in rows if r.get(key) is not None], dtype=float) * scale
-        ax.hist(v[np.isfinite(v)], bins=12, color="#1f77b4")
-        ax.set_xlabel(label)
-    axes[0].set_ylabel("curves")
-    causes = {}
+    """Histograms of fitted parameters across curves, one colour per group (``analyze_folder``
+    rows; as Fig. 5 of the dissertation: the spread of one tip's parameters across curves).
+
+    Log-spaced bins for positive quantities spanning more than a decade.
+    """
+    vals = [(r.get("group", ""), _si_parameters(r)) for r in rows]
+    keys = ["free amplitude [nm]", "adhesion, baseline [nN]",
+            "contact stiffness, baseline [nN/nm^1.5]", "long-range damping [N s/m]",
+            "damping decay length [nm]", "held-out gain"]
+    groups = sorted({g for g, _ in vals})
+    fig = Figure(figsize=(11.0, 6.0))
+    axes = fig.subplots(2, 3).ravel()
+    for ax, key in zip(axes, keys, strict=True):
+        data = {g: np.array([v.get(key, np.nan) for gg, v in vals if gg == g], dtype=float)
+                for g in groups}
+        allv = np.concatenate([d[np.isfinite(d)] for d in data.values()])
+        if allv.size == 0:
+            ax.set_axis_off()
+            continue
+        logx = bool(np.all(allv > 0) and allv.max() > 10 * allv.min())
+        bins = (np.geomspace(allv.min(), allv.max(), 16) if logx
+                else np.linspace(allv.min(), allv.max() + 1e-12, 16))
+        ax.hist([d[np.isfinite(d)] for d in data.values()], bins=bins, stacked=True,
+                label=[f"{g} ({np.isfinite(data[g]).sum()})" for g in groups])
+        if logx:
+            ax.set_xscale("log")
+        ax.set_xlabel(key)
+        ax.set_ylabel("curves")
+    axes[0].legend(fontsize=8)
+    causes: dict[str, int] = {}
     for r in rows:
         causes[r["cause"]] = causes.get(r["cause"], 0) + 1
     fig.suptitle(", ".join(f"{c}: {n}" for c, n in sorted(causes.items())), fontsize=9)
