@@ -54,6 +54,10 @@ class CurveDiagnoser:
         Time step of the slow flow (dimensionless, see :class:`CurveFitter`).
     n_starts : int
         Starts of the baseline fit (see :class:`CurveFitter`).
+    max_evaluations : int or None
+        Cap on the forward-model evaluations of the whole diagnosis (time per curve = this
+        times the cost of one evaluation): half for the baseline at most, the rest shared
+        equally by the extensions still to fit. None: no cap.
 
     Attributes
     ----------
@@ -65,12 +69,15 @@ class CurveDiagnoser:
     cause_ : str
     confidence_ : float
     gain_ : float
+    n_evaluations_ : int
+        Forward-model evaluations spent.
     """
 
     def __init__(self, *, hypotheses: tuple[Hypothesis, ...] = EXTENSIONS,
                  threshold: float = 10.0, a0_m: float = 0.3e-9, tip_radius_m: float = 10e-9,
                  lockin: LockIn | None = None, max_nfev: int = 12,
-                 step: float = 4.0 * math.pi, n_starts: int = 1) -> None:
+                 step: float = 4.0 * math.pi, n_starts: int = 1,
+                 max_evaluations: int | None = None) -> None:
         if not all(isinstance(h, Hypothesis) for h in hypotheses):
             raise ValueError("hypotheses must be Hypothesis objects")
         if not (math.isfinite(threshold) and threshold >= 0.0):
@@ -83,6 +90,9 @@ class CurveDiagnoser:
         self.max_nfev = int(max_nfev)
         self.step = float(step)
         self.n_starts = int(n_starts)
+        if max_evaluations is not None and int(max_evaluations) < 2:
+            raise ValueError(f"max_evaluations must be >= 2 or None, got {max_evaluations!r}")
+        self.max_evaluations = None if max_evaluations is None else int(max_evaluations)
 
     def fit(self, curve: Curve) -> CurveDiagnoser:
         """Fit on the approach (``segment == 0``), measure on the retraction."""
@@ -91,27 +101,62 @@ class CurveDiagnoser:
         fit_mask = curve.segment == 0
         held = curve.segment == 1
         self.curve_ = curve
-        self.baseline_ = CurveFitter(n_starts=self.n_starts, **opts).fit(curve, mask=fit_mask)
+        budget = self.max_evaluations
+        self.baseline_ = CurveFitter(
+            n_starts=self.n_starts, max_evaluations=None if budget is None else budget // 2,
+            **opts).fit(curve, mask=fit_mask)
+        spent = self.baseline_.n_evaluations_
+        self.fits_: dict[str, CurveFitter] = {}
+        for round_ in range(2):
+            for i, h in enumerate(self.hypotheses):
+                share = (None if budget is None else max(1, (budget - spent) // (
+                    (2 - round_) * len(self.hypotheses) - i)))
+                f = CurveFitter(hypothesis=h, start=self.baseline_.values_,
+                                max_nfev=self.max_nfev, max_evaluations=share,
+                                **opts).fit(curve, mask=fit_mask)
+                spent += f.n_evaluations_
+                old = self.fits_.get(h.cause)
+                if old is None or f.chi2_ < old.chi2_:
+                    self.fits_[h.cause] = f
+            if round_ == 1 or not self.fits_:
+                break
+            # an extension started from the baseline may have left the baseline's local
+            # minimum (the jump makes the cost rough) rather than needed its term: refit the
+            # baseline from the best extension's solution without the term; if that is better,
+            # the evidence is measured against it and every extension is refitted from it
+            # (keeping each one's better fit)
+            best = min(self.fits_.values(), key=lambda f: f.chi2_)
+            if best.chi2_ >= self.baseline_.chi2_ or best.hypothesis is None:
+                break
+            own = {p.field for p in best.hypothesis.parameters}
+            start = {k: v for k, v in best.values_.items() if k not in own}
+            share = None if budget is None else max(1, (budget - spent) // 3)
+            rebase = CurveFitter(start=start, rescales=((1.0, 1.0),), max_evaluations=share,
+                                 **opts).fit(curve, mask=fit_mask)
+            spent += rebase.n_evaluations_
+            if rebase.chi2_ >= self.baseline_.chi2_:
+                break
+            log.info("baseline refitted from the %s solution: chi2 %.4g -> %.4g",
+                     best.hypothesis.cause, self.baseline_.chi2_, rebase.chi2_)
+            self.baseline_ = rebase
         b_chi2 = self.baseline_.chi2_
         n = self.baseline_.n_fit_
         b_held = heldout_nrmse(self.baseline_, curve, held)
-        self.fits_: dict[str, CurveFitter] = {}
         cands = []
         for h in self.hypotheses:
-            f = CurveFitter(hypothesis=h, start=self.baseline_.values_, max_nfev=self.max_nfev,
-                            **opts).fit(curve, mask=fit_mask)
+            f = self.fits_[h.cause]
             # the extension nests the baseline: it can never fit worse than its start
             chi2 = min(f.chi2_, b_chi2)
             k = len(h.parameters)
             evidence = n * math.log(b_chi2 / max(chi2, 1e-300)) - k * math.log(n)
             e_held = heldout_nrmse(f, curve, held)
             gain = 1.0 - e_held / b_held if b_held > 0 and np.any(held) else float("nan")
-            self.fits_[h.cause] = f
             cands.append({"cause": h.cause, "evidence": float(evidence), "gain": float(gain),
                           "heldout_nrmse": float(e_held), "chi2": float(chi2)})
         self.candidates_, self.cause_, self.confidence_, self.gain_ = name_cause(
             cands, threshold=self.threshold)
         self.baseline_heldout_ = float(b_held)
+        self.n_evaluations_ = int(spent)
         return self
 
     @property

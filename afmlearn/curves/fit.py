@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 from typing import final
@@ -27,6 +28,17 @@ OFFSET = "offset"
 OMEGA = "omega"
 #: floors of the residual weights (amplitude / free amplitude, phase [rad])
 _SIGMA_FLOOR = (1e-3, math.radians(0.05))
+#: factors on the attraction ``vdw`` and the contact ``stiffness`` tried around a solution: the
+#: cost is rough near the bistable jump and a new term (an electrostatic tail, another contact
+#: exponent) trades against the baseline's attraction and stiffness
+RESCALES = ((1.0, 1.0), (0.3, 1.0), (0.03, 1.0), (1.0, 3.0), (1.0, 0.3), (0.3, 3.0))
+#: fine scans of the surface position around the coarse scan's best (/ free amplitude): whether
+#: the model's tip reaches the contact turns on a fraction of a nanometre
+FINE_OFFSETS = tuple(np.linspace(-0.06, 0.06, 25))
+#: factors on vdw and stiffness of that fine grid
+FINE_SCALES = ((0.25, 0.5, 1.0, 2.0, 4.0), (0.1, 0.3, 1.0, 3.0, 10.0))
+#: indentation (/ free amplitude) at which the contact force is held when the exponent changes
+DELTA_REF = 0.02
 
 
 @final
@@ -52,6 +64,13 @@ class CurveFitter:
     n_starts : int
         Least-squares runs from the best points of the start scan (the bistable jump makes
         the cost rough: more starts, fewer local minima); the best fit is kept.
+    rescales : sequence of (float, float)
+        Factors on ``vdw`` and ``stiffness`` tried around the starting point (with a ``start``:
+        combined with every starting value of the hypothesis' parameters; without: around the
+        scan's solution, refined once more if one of them is better). ``()``: none.
+    max_evaluations : int or None
+        Cap on the model evaluations of this fit (start scan and refinement; a refinement
+        iteration costs one evaluation per fitted parameter plus one). None: no cap.
 
     Attributes
     ----------
@@ -70,12 +89,16 @@ class CurveFitter:
     model_ : SlowFlowModel
     sigma_ : tuple of float
         Amplitude and phase noise used as weights.
+    n_evaluations_ : int
+        Model evaluations spent.
     """
 
     def __init__(self, *, hypothesis: Hypothesis | None = None, a0_m: float = 0.3e-9,
                  tip_radius_m: float = 10e-9, lockin: LockIn | None = None,
                  max_nfev: int = 60, start: dict | None = None,
-                 step: float = 4.0 * math.pi, n_starts: int = 1) -> None:
+                 step: float = 4.0 * math.pi, n_starts: int = 1,
+                 rescales: tuple[tuple[float, float], ...] = RESCALES,
+                 max_evaluations: int | None = None) -> None:
         if hypothesis is not None and not isinstance(hypothesis, Hypothesis):
             raise ValueError(f"hypothesis must be a Hypothesis, got {type(hypothesis).__name__}")
         for name, v in (("a0_m", a0_m), ("tip_radius_m", tip_radius_m)):
@@ -95,6 +118,13 @@ class CurveFitter:
         if int(n_starts) < 1:
             raise ValueError(f"n_starts must be >= 1, got {n_starts!r}")
         self.n_starts = int(n_starts)
+        for r in rescales:
+            if len(r) != 2 or not all(math.isfinite(f) and f > 0 for f in r):
+                raise ValueError(f"rescales must be pairs of finite factors > 0, got {r!r}")
+        self.rescales = tuple((float(a), float(b)) for a, b in rescales)
+        if max_evaluations is not None and int(max_evaluations) < 1:
+            raise ValueError(f"max_evaluations must be >= 1 or None, got {max_evaluations!r}")
+        self.max_evaluations = None if max_evaluations is None else int(max_evaluations)
 
     # ------------------------------------------------------------------ public API
     def fit(self, curve: Curve, *, mask: NDArray[np.bool_] | None = None) -> CurveFitter:
@@ -109,23 +139,51 @@ class CurveFitter:
         if self.hypothesis is not None:
             params += list(self.hypothesis.parameters)
         self._params = params
+        self.n_evaluations_ = 0
         starts = self._start(curve, params)
         w0 = self.model_.omega
         lo = np.array([self._offset_bounds[0], w0 - 0.005] + [_enc(p, p.low) for p in params])
         hi = np.array([self._offset_bounds[1], w0 + 0.005] + [_enc(p, p.high) for p in params])
+        self._lo, self._hi = lo, hi
         best = None
         for x0 in starts:
-            x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
-            res = optimize.least_squares(self._residual, x0, bounds=(lo, hi), method="trf",
-                                         x_scale="jac", diff_step=1e-4,
-                                         max_nfev=self.max_nfev)
-            if best is None or res.cost < best.cost:
+            res = self._refine(x0)
+            if res is not None and (best is None or res.cost < best.cost):
                 best = res
-        self._set(best.x)
-        r = self._residual(best.x)
+        x = best.x if best is not None else np.clip(starts[0], lo, hi)
+        self._set(x)
+        r = self._residual(x)
         self.chi2_ = float(r @ r)
         self.n_fit_ = int(r.size)
         return self
+
+    def _remaining(self) -> int | None:
+        if self.max_evaluations is None:
+            return None
+        # one evaluation is kept for the final residual
+        return self.max_evaluations - 1 - self.n_evaluations_
+
+    def _refine(self, x0: NDArray[np.float64]):
+        """One bounded least-squares run from ``x0`` within the evaluation budget."""
+        x0 = np.clip(x0, self._lo + 1e-9, self._hi - 1e-9)
+        nfev = self.max_nfev
+        left = self._remaining()
+        if left is not None:
+            # an iteration costs one evaluation plus one per parameter (the Jacobian)
+            nfev = min(nfev, (left - 1) // (x0.size + 2))
+            if nfev < 1:
+                return None
+        return optimize.least_squares(self._residual, x0, bounds=(self._lo, self._hi),
+                                      method="trf", x_scale="jac", diff_step=1e-4,
+                                      max_nfev=nfev)
+
+    def _cost(self, x: NDArray[np.float64]) -> float:
+        """Weighted sum of squares at ``x`` (inf once the evaluation budget is spent)."""
+        left = self._remaining()
+        if left is not None and left <= 0:
+            return math.inf
+        r = self._residual(x)
+        return float(r @ r)
 
     def predict(self, curve: Curve) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Amplitude (/ free amplitude) and lag [rad] of the whole curve, shape (m,) each."""
@@ -161,6 +219,7 @@ class CurveFitter:
                                      if k not in (OFFSET, DRIFT, OMEGA)})
 
     def _residual(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        self.n_evaluations_ += 1
         c, m = self._curve, self._mask
         v = self._values(x)
         a, p = self._model(v).predict(self._law(v), c.tau, self.gap(c, v))
@@ -186,16 +245,15 @@ class CurveFitter:
         if self.start is not None:
             x = [self.start.get(OFFSET, guess), self.start.get(OMEGA, self.model_.omega)]
             x += [_enc(p, self.start.get(p.field, p.init)) for p in params]
-            cands = [np.array(x)]
-            for i, p in enumerate(params):
-                for alt in p.alternatives:
-                    y = np.array(x)
-                    y[2 + i] = _enc(p, alt)
-                    cands.append(y)
+            x = np.array(x)
+            # every combination of the new parameters' starting values, each with the
+            # attraction and stiffness rescaled
+            cands = self._rescaled(x, params, with_identity=True)
             if len(cands) == 1:
                 return cands
-            costs = [float(r @ r) for r in map(self._residual, cands)]
-            return [cands[int(np.argmin(costs))]]
+            costs = np.array([self._cost(c) for c in cands])
+            order = np.argsort(costs, kind="stable")[: self.n_starts]
+            return [cands[int(i)] for i in order]
         scan = []
         tail = [_enc(p, p.init) for p in params[2:]]
         offsets = (guess - 0.05, guess, guess + 0.05) if self.n_starts == 1 else \
@@ -205,10 +263,66 @@ class CurveFitter:
                 for e in (1.0, 30.0, 1000.0):
                     x = np.array([off, self.model_.omega, math.log10(vdw), math.log10(e)]
                                  + tail)
-                    r = self._residual(x)
-                    scan.append((float(r @ r), len(scan), x))
+                    scan.append((self._cost(x), len(scan), x))
+        # a fine grid around the coarse scan's best: surface position jointly with the
+        # attraction and the stiffness (the valley is narrow and correlated: whether the model's
+        # tip reaches the contact turns on a fraction of a nanometre)
+        x0 = min(scan, key=lambda t: (t[0], t[1]))[2]
+        fine = []
+        for dx in FINE_OFFSETS:
+            for fv in FINE_SCALES[0]:
+                for fs in FINE_SCALES[1]:
+                    y = x0.copy()
+                    y[0] += dx
+                    y[2] += math.log10(fv)
+                    y[3] += math.log10(fs)
+                    if not np.array_equal(y, x0):
+                        fine.append(y)
+        if self.max_evaluations is not None:
+            # at most a third of the budget: a sparser grid (every k-th point)
+            k = math.ceil(len(fine) / max(1, self.max_evaluations // 3))
+            fine = fine[::k]
+        for y in fine:
+            scan.append((self._cost(y), len(scan), y))
         scan.sort(key=lambda t: (t[0], t[1]))
-        return [x for _, _, x in scan[: self.n_starts]]
+        out = [x for _, _, x in scan[: self.n_starts]]
+        # the coarse scan's best is refined too (the fine grid's best may sit in a narrower
+        # valley): the better fit is kept
+        if not any(np.array_equal(x0, x) for x in out):
+            out.append(x0)
+        return out
+
+    def _rescaled(self, x: NDArray[np.float64], params: list[Parameter], *,
+                  with_identity: bool) -> list[NDArray[np.float64]]:
+        """Candidates around ``x``: the hypothesis' parameters at each of their starting
+        values (the start's or ``init``, then ``alternatives``) times the ``rescales`` of
+        ``vdw`` and ``stiffness``; a changed contact exponent keeps the force at
+        ``DELTA_REF``."""
+        idx = {p.field: 2 + i for i, p in enumerate(params)}
+        extra = [p for p in params if p.field not in ("vdw", "stiffness")]
+        choices = [[float(x[idx[p.field]])] + [_enc(p, a) for a in p.alternatives
+                                                if _enc(p, a) != float(x[idx[p.field]])]
+                   for p in extra]
+        # the exponent the given stiffness belongs to
+        e0 = (self.start or {}).get("exponent", self._base.exponent)
+        out = []
+        for combo in itertools.product(*choices):
+            y = x.copy()
+            for p, v in zip(extra, combo, strict=True):
+                y[idx[p.field]] = v
+            de = 0.0
+            if "exponent" in idx:
+                de = e0 - y[idx["exponent"]]
+            for fv, fs in self.rescales or ((1.0, 1.0),):
+                z = y.copy()
+                z[idx["vdw"]] += math.log10(fv)
+                z[idx["stiffness"]] += math.log10(fs) + de * math.log10(DELTA_REF)
+                out.append(z)
+        if not with_identity:
+            out = [z for z in out if not np.allclose(z, x)]
+        elif not any(np.allclose(z, x) for z in out):
+            out.insert(0, x.copy())
+        return out
 
 
 def _enc(p: Parameter, v: float) -> float:

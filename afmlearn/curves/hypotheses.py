@@ -48,14 +48,21 @@ BASELINE = Hypothesis("none", (Parameter("vdw", 1e-5, 1e-9, 1e-1),
                                Parameter("stiffness", 10.0, 1e-2, 1e5)))
 
 EXTENSIONS: tuple[Hypothesis, ...] = (
-    Hypothesis("contact_geometry", (Parameter("exponent", 1.8, 1.0, 3.5, log=False),)),
-    Hypothesis("viscoelastic", (Parameter("visco", 0.05, 1e-5, 1e3),)),
-    Hypothesis("long_range_damping", (Parameter("damping", 1e-3, 1e-7, 1e1),
+    Hypothesis("contact_geometry", (Parameter("exponent", 2.0, 1.0, 3.5, log=False,
+                                              alternatives=(1.2, 2.5)),)),
+    Hypothesis("viscoelastic", (Parameter("visco", 0.05, 1e-5, 1e3,
+                                          alternatives=(0.005, 0.5)),)),
+    Hypothesis("long_range_damping", (Parameter("damping", 1e-3, 1e-7, 1e1,
+                                                alternatives=(1e-2,)),
                                       # up to 100 free amplitudes: squeeze-film damping
                                       # reaches microns
                                       Parameter("decay_length", 0.1, 1e-3, 100.0,
                                                 alternatives=(1.0, 10.0)))),
-    Hypothesis("electrostatic", (Parameter("electrostatic", 1e-4, 1e-9, 1e0),)),
-    Hypothesis("adhesion_hysteresis", (Parameter("neck", 0.01, 1e-5, 0.5),)),
+    # the tail trades against the attraction: starts up to 100x the usual vdW scale, each
+    # with the baseline's attraction rescaled (fit.RESCALES)
+    Hypothesis("electrostatic", (Parameter("electrostatic", 1e-4, 1e-9, 1e0,
+                                           alternatives=(1e-3, 1e-2)),)),
+    Hypothesis("adhesion_hysteresis", (Parameter("neck", 0.01, 1e-5, 0.5,
+                                                 alternatives=(0.003, 0.03)),)),
     Hypothesis(DRIFT, (Parameter(DRIFT, 0.0, -1e-4, 1e-4, log=False),)),
 )

@@ -95,3 +95,32 @@ def test_diagnoser_names_the_hidden_cause(cause, law, drift):
     assert diag.cause_ == cause
     if cause != "none":
         assert diag.gain_ > 0.0
+
+
+def test_evaluation_budget_is_respected():
+    curve = synthetic(TRUTH)
+    fit = CurveFitter(a0_m=0.015 * LENGTH, max_evaluations=40).fit(curve)
+    assert 10 < fit.n_evaluations_ <= 40
+    assert np.isfinite(fit.chi2_)
+    diag = CurveDiagnoser(a0_m=0.015 * LENGTH, hypotheses=EXTENSIONS[:2],
+                          max_evaluations=150).fit(curve)
+    assert diag.n_evaluations_ <= 150
+    assert diag.cause_ in ("none", EXTENSIONS[0].cause, EXTENSIONS[1].cause)
+    with pytest.raises(ValueError, match="max_evaluations"):
+        CurveDiagnoser(max_evaluations=1)
+
+
+def test_exponent_starts_hold_the_contact_force_at_the_reference_indentation():
+    from afmlearn.curves.fit import DELTA_REF
+    from afmlearn.curves.hypotheses import EXTENSIONS as EXT
+
+    geometry = next(h for h in EXT if h.cause == "contact_geometry")
+    curve = synthetic(TRUTH)
+    fit = CurveFitter(a0_m=0.015 * LENGTH, hypothesis=geometry, rescales=((1.0, 1.0),),
+                      start={"vdw": 1e-5, "stiffness": 20.0}, max_evaluations=5).fit(curve)
+    x = np.array([0.3, 1.0, math.log10(1e-5), math.log10(20.0), 1.5])
+    cands = fit._rescaled(x, fit._params, with_identity=False)
+    exps = sorted(c[4] for c in cands)
+    assert exps == pytest.approx([1.2, 2.5])  # the alternatives (the start's 1.5 is x)
+    for c in cands:  # stiffness * DELTA_REF**exponent unchanged: same force at DELTA_REF
+        assert 10 ** c[3] * DELTA_REF ** c[4] == pytest.approx(20.0 * DELTA_REF**1.5, rel=1e-9)
