@@ -164,7 +164,22 @@ def run_one(job: dict) -> dict:
     t_fit = time.perf_counter() - t1
     errs = force_errors(diag, d, case["truth"])
     return {**job, "named": diag.cause_, "gain": diag.gain_, "confidence": diag.confidence_,
-            "candidates": diag.candidates_, "errors": errs, "t_sim": t_sim, "t_fit": t_fit}
+            "candidates": diag.candidates_, "errors": errs, "t_sim": t_sim, "t_fit": t_fit,
+            "n_evaluations": diag.n_evaluations_, "exposure": exposure(d, case["truth"])}
+
+
+def exposure(data: dict, truth: dict) -> dict:
+    """How much of the approach exercises the contact (from the truth, for the report only).
+
+    ``indentation_nm``: deepest lower turning point past the contact onset ``a0``;
+    ``touch_fraction``: share of approach samples whose turning point passes ``a0``;
+    ``repulsive_end``: the approach ends on the repulsive branch (lag below 90 deg).
+    """
+    app = data["segment"] == 0
+    low = (truth["rest_gap_m"] - data["amplitude_m"])[app]
+    return {"indentation_nm": float(max(0.0, (A0 - low.min()) * 1e9)),
+            "touch_fraction": float(np.mean(low < A0)),
+            "repulsive_end": bool(data["phase_rad"][app][-1] < math.pi / 2)}
 
 
 def load(path: Path) -> list[dict]:
@@ -189,12 +204,17 @@ def section(recs: list[dict], args) -> str:
         ratios += list(ea[ok] / es[ok])
         named = ", ".join(f"{c}:{n}" for c, n in sorted(
             {c: sum(r["named"] == c for r in rs) for c in {r["named"] for r in rs}}.items()))
-        rows.append([cause, len(rs), f"{100 * acc:.0f} %", fmt(np.nanmedian(ea)),
+        ex = [r.get("exposure") for r in rs if r.get("exposure")]
+        touch = (f"{sum(e['touch_fraction'] > 0 for e in ex)}/{len(ex)}, "
+                 f"{fmt(np.median([e['indentation_nm'] for e in ex]))} nm, "
+                 f"{sum(e['repulsive_end'] for e in ex)}" if ex else "")
+        rows.append([cause, len(rs), f"{100 * acc:.0f} %", touch, fmt(np.nanmedian(ea)),
                      fmt(np.nanmedian(es)), fmt(np.nanmedian(eh)), fmt(ratio),
                      fmt(np.median([r["t_fit"] for r in rs]), 3), named])
     allr = np.array(ratios)
     acc_all = np.mean([r["named"] == r["cause"] for r in recs])
-    head = ["cause (hidden)", "curves", "named right", "force NRMSE afmlearn",
+    head = ["cause (hidden)", "curves", "named right",
+            "tip touched, median indentation, ended repulsive (truth)", "force NRMSE afmlearn",
             "force NRMSE peer (Katan/Payam SJ)", "force NRMSE peer (Hoelscher)",
             "median ratio afmlearn / SJ", "fit time [s]", "named as"]
     text = [
