@@ -8,6 +8,11 @@ read from ``z <= a0`` at every stage; the run is plain fixed-step RK4 of
 the force's kink or jump at ``z = a0`` gives first-order local errors there, so the step is a
 fraction (``substeps``) of the sampling interval. Checked against scipy's ``solve_ivp`` in the
 tests.
+
+:func:`simulate_period` is the output-error stage's one-period map
+(:mod:`afmlearn.identify.output_error`): the same kernel WITH the switches at ``a0`` located,
+so the end state is a smooth function of the state and the parameters (Newton shooting and
+finite-difference Jacobians need that).
 """
 
 from __future__ import annotations

@@ -41,14 +41,7 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize, minimize_scalar
 
 from .drive import AbstractDrivePhase, RecordedPhase
-from .library import (
-    AFMLibrary,
-    ContactIndicator,
-    ExponentialDamping,
-    Indentation,
-    IndentationRate,
-    InversePower,
-)
+from .library import AFMLibrary, ExponentialDamping, Indentation, IndentationRate, InversePower
 from .output_error import OutputErrorResult, OutputErrorStage, covariance_samples
 from .problem import JointDesign, JointProblem
 from .selection import Candidate, best_by_ic, knee_one_se, profile_interval
@@ -638,7 +631,8 @@ def fit_joint(problem: JointProblem, library: AFMLibrary, *,
                 output_error.profile, low=exponent.low, high=exponent.high))
         oe, expo = output_error.run(problem, lib_s, a0_s, coef, dominant,
                                     [*_contact_pair(library),
-                                     *_later_terms(cands, ki, des.library, n_lin)])
+                                     *_later_terms(cands, ki, des.library, n_lin)],
+                                    baseline=_contact_pair(library))
         if oe is None:
             say("output error: an orbit of the equation-error law was not found; kept it")
     if oe is not None:
@@ -657,12 +651,11 @@ def fit_joint(problem: JointProblem, library: AFMLibrary, *,
                        refined=refined, phase_info=phase_info, output_error=oe)
 
 
-def _contact_pair(library: AFMLibrary) -> list[tuple[Any, ...]]:
-    """The sphere's van der Waals pair ``z^-2 [z>a0]`` + ``[z<=a0]`` of ``library`` (the
-    physics.md baseline's attraction), as one candidate; empty when either is absent."""
-    vdw = [t for t in library.terms if isinstance(t, InversePower) and t.n == 2.0]
-    ind = [t for t in library.terms if isinstance(t, ContactIndicator)]
-    return [(vdw[0], ind[0])] if vdw and ind else []
+def _contact_pair(library: AFMLibrary) -> list[Any]:
+    """The sphere's van der Waals term ``z^-2`` of ``library`` (held at ``a0`` in contact: the
+    physics.md baseline's attraction, continuous at the onset) as a candidate; empty when
+    the library has none."""
+    return [t for t in library.terms if isinstance(t, InversePower) and t.n == 2.0][:1]
 
 
 def _later_terms(cands: list[Candidate], knee: int, library: AFMLibrary, n_lin: int

@@ -43,7 +43,7 @@ from scipy.optimize import least_squares
 from afmlearn.preprocess import fit_harmonics
 
 from ._simulate import simulate_period
-from .library import AFMLibrary, Indentation
+from .library import AFMLibrary, Indentation, TermInput
 from .problem import N_LEVER, JointProblem
 
 __all__ = ["MeasuredHarmonics", "OutputErrorFit", "OutputErrorLaw", "OutputErrorProfile",
@@ -569,56 +569,73 @@ class OutputErrorProfile:
     max_points: int = 20
     max_nfev: int = 30
 
-    def run(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
-            best: OutputErrorResult) -> tuple[dict[str, Any], OutputErrorResult]:
-        """The profile table and interval, and the best solution found (``best`` or a
-        better point of the profile, re-fitted with the exponent free)."""
-        assert best.law.exponent_index is not None
-        pts: dict[float, OutputErrorResult] = {round(float(best.u[4]), 6): best}
-        level = 3.841 * best.dispersion
-        p0 = float(best.u[4])
+    def _walk(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
+              start: OutputErrorResult) -> dict[float, OutputErrorResult]:
+        """One law's profile: the grid ``low + k step`` from ``start``'s exponent outwards."""
+        ei = start.law.exponent_index
+        assert ei is not None
+        grid = np.round(np.arange(self.low, self.high + 1e-9, self.step), 6)
+        p0 = float(start.u[4])
+        pts: dict[float, OutputErrorResult] = {round(p0, 6): start}
+        level = 3.841 * start.dispersion
         n = 0
-        for direction in (-1.0, 1.0):
-            prev, states = best, None
-            p = p0
-            while n < self.max_points:
-                p = round(p + direction * self.step, 6)
-                if not self.low - 1e-9 <= p <= self.high + 1e-9:
+        for side in (grid[grid < p0 - 1e-6][::-1], grid[grid > p0 + 1e-6]):
+            prev, states = start, None
+            for p in side:
+                if n >= self.max_points:
                     break
                 u0 = prev.u.copy()
                 # the contact coefficient rescaled to keep the force at the deepest
                 # indentation: a start near the new exponent's optimum
                 depth = max(float(prev.u[3]) - problem.z_min(), 1e-6)
-                u0[best.law.n_head + best.law.exponent_index] *= depth ** (float(prev.u[4]) - p)
+                u0[start.law.n_head + ei] *= depth ** (float(prev.u[4]) - p)
                 u0[4] = p
-                r, states = fit.solve(problem, meas, best.law, u0, fixed={4: p},
+                r, states = fit.solve(problem, meas, start.law, u0, fixed={4: float(p)},
                                       states=states, max_nfev=self.max_nfev)
                 n += 1
-                pts[p] = r
+                pts[float(p)] = r
                 if math.isfinite(r.chi2):
                     prev = r
-                cmin = min(v.chi2 for v in pts.values())
-                if r.chi2 - cmin > level + 2.0:
+                if r.chi2 - min(v.chi2 for v in pts.values()) > level + 2.0:
                     break
-        ks = sorted(pts)
-        prof = np.array([(k, pts[k].chi2) for k in ks])
-        k_min = ks[int(np.nanargmin(prof[:, 1]))]
-        if pts[k_min].chi2 < best.chi2 - 1e-6 * max(best.chi2, 1.0):
-            # a better basin along the profile: free the exponent again from there
-            better, _ = fit.solve(problem, meas, best.law, pts[k_min].u)
-            if better.chi2 < pts[k_min].chi2:
-                best = better
-                pts[round(float(better.u[4]), 6)] = better
-            else:
-                best = pts[k_min]
-            ks = sorted(pts)
-            prof = np.array([(k, pts[k].chi2) for k in ks])
+        return pts
+
+    def run(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
+            starts: list[OutputErrorResult]) -> tuple[dict[str, Any], OutputErrorResult]:
+        """The profile table and interval over the laws of ``starts`` (each with a contact
+        exponent), and the best solution found.
+
+        Each law is profiled on its own; the profile of the exponent is their lower envelope
+        in ``chi2 + n_u log(n_residuals)`` (the laws may differ in their number of terms), and
+        a profile point better than every start is re-fitted with the exponent free.
+        """
+        starts = [r for r in starts if r.law.exponent_index is not None]
+        assert starts
+        env: dict[float, tuple[float, OutputErrorResult]] = {}
+        for st in starts:
+            for p, r in self._walk(fit, problem, meas, st).items():
+                sc = _bic(r)
+                if p not in env or sc < env[p][0]:
+                    env[p] = (sc, r)
+        best = min(starts, key=_bic)
+        k_min = min(env, key=lambda k: env[k][0])
+        if env[k_min][0] < _bic(best) - 1e-6 * max(best.chi2, 1.0):
+            # a better basin along a profile: free the exponent again from there
+            cand = env[k_min][1]
+            better, _ = fit.solve(problem, meas, cand.law, cand.u)
+            best = better if better.converged and _bic(better) < env[k_min][0] else cand
+            p_b = round(float(best.u[4]), 6)
+            if p_b not in env or _bic(best) < env[p_b][0]:
+                env[p_b] = (_bic(best), best)
+        ks = sorted(env)
+        prof = np.array([(k, env[k][0]) for k in ks])
         level = 3.841 * best.dispersion
         lo, hi, crossed = _crossings(prof, level)
         bounded = bool(crossed and lo > self.low + 1e-9 and hi < self.high - 1e-9)
         return ({"profile": prof, "interval": (lo, hi), "bounded": bounded,
                  "best_exponent": float(best.u[4]), "level": level,
-                 "dispersion": best.dispersion, "objective": "output_error"}, best)
+                 "dispersion": best.dispersion, "objective": "output_error",
+                 "laws": [r.law.library.names for r in starts]}, best)
 
 
 def _crossings(prof: FloatArray, level: float) -> tuple[float, float, bool]:
@@ -649,6 +666,19 @@ def _bic(r: OutputErrorResult) -> float:
     return r.chi2 + r.u.size * math.log(max(r.dof + r.u.size, 2))
 
 
+def _small(problem: JointProblem, res: OutputErrorResult, terms: list[Any]) -> FloatArray:
+    """Start coefficients of added ``terms``: 5 % of the law's RMS force on the denoised
+    orbits each, with the term's physical sign (a start ON a sign bound can stay there)."""
+    lib, a0, c = res.library, res.a0, res.u[res.law.n_head:]
+    ins = [TermInput(z=o.gap - o.denoised.x, zdot=-o.denoised.v, x=o.denoised.x, a0=a0)
+           for o in problem.observations]
+    f_rms = float(np.sqrt(np.mean(np.concatenate([lib.evaluate(t) @ c for t in ins]) ** 2)))
+    extra = AFMLibrary(list(terms))
+    t_rms = np.sqrt(np.mean(np.concatenate([extra.evaluate(t) for t in ins]) ** 2, axis=0))
+    sign = np.array([t.sign if problem.physical_signs and t.sign else 1 for t in terms], float)
+    return np.where(t_rms > 0, sign * 0.05 * f_rms / np.where(t_rms > 0, t_rms, 1.0), 0.0)
+
+
 @final
 @dataclass(frozen=True)
 class OutputErrorSupport:
@@ -667,9 +697,7 @@ class OutputErrorSupport:
 
     def run(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
             base: OutputErrorResult, extra: list[Any]) -> OutputErrorResult:
-        """``extra``: candidate additions, each a term or a tuple of terms entered together
-        (the sphere's van der Waals pair ``z^-2 [z>a0]`` + ``[z<=a0]``, whose coefficients
-        make the force continuous at ``a0`` only together)."""
+        """``extra``: candidate additions, each a term or a tuple of terms entered together."""
         best = base
         tried = 0
         for cand in extra:
@@ -683,7 +711,7 @@ class OutputErrorSupport:
             tried += 1
             lib = AFMLibrary([*best.law.library.terms, *group])
             law = OutputErrorLaw(library=lib, exponent_index=best.law.exponent_index)
-            r, _ = fit.solve(problem, meas, law, np.append(best.u, np.zeros(len(group))),
+            r, _ = fit.solve(problem, meas, law, np.append(best.u, _small(problem, best, group)),
                              max_nfev=self.max_nfev)
             if r.converged and _bic(r) < _bic(best):
                 best = r
@@ -719,31 +747,87 @@ class OutputErrorStage:
 
     ``run`` takes the equation-error solution and returns the output-error one (or None when
     its orbits cannot be found: the caller keeps the equation-error law) and the exponent's
-    profile over the output-error objective (None without a contact term).
+    profile over the output-error objective (None without a contact term). Order: refine from
+    the equation-error law; restart from ``n_onsets`` contact onsets spread over the allowed
+    range (geometric, the ends excluded) and keep the best; revise the support; profile.
     """
 
     fit: OutputErrorFit = field(default_factory=OutputErrorFit)
     support: OutputErrorSupport | None = field(default_factory=OutputErrorSupport)
     profile: OutputErrorProfile | None = field(default_factory=OutputErrorProfile)
+    n_onsets: int = 5
+    onset_nfev: int = 25
 
     def run(self, problem: JointProblem, library: AFMLibrary, a0: float, coef: FloatArray,
-            exponent: float | None, extra: list[Any] | None = None
+            exponent: float | None, extra: list[Any] | None = None,
+            baseline: list[Any] | None = None
             ) -> tuple[OutputErrorResult | None, dict[str, Any] | None]:
+        """``extra``: candidate terms for the support revision; ``baseline``: terms that with
+        the dominant contact term alone form a second starting law (the physics.md baseline:
+        the sphere's van der Waals ``z^-2``), fitted the same way; the lower BIC goes on."""
         res, meas = self.fit.run(problem, library, a0, coef, exponent)
         if not res.converged or not math.isfinite(res.chi2):
             res = self._restart(problem, meas, res)
         if not res.converged or not math.isfinite(res.chi2):
             return None, None
+        res = self._onsets(problem, meas, res)
+        ei = res.law.exponent_index
+        laws = []
+        if baseline and ei is not None:
+            h = res.law.n_head
+            law_b = OutputErrorLaw(library=AFMLibrary([res.law.library.terms[ei], *baseline]),
+                                   exponent_index=0)
+            if set(law_b.library.names) != set(res.law.library.names):
+                u_b = np.concatenate([res.u[:h], [res.u[h + ei]],
+                                      _small(problem, res, baseline)])
+                rb, _ = self.fit.solve(problem, meas, law_b, u_b)
+                if rb.converged:
+                    laws.append(self._onsets(problem, meas, rb))
         if self.support is not None:
             res = self.support.run(self.fit, problem, meas, res, list(extra or []))
+        laws = [res, *(r for r in laws
+                       if set(r.law.library.names) != set(res.law.library.names))]
         expo = None
         if self.profile is not None and res.law.exponent_index is not None:
-            expo, res = self.profile.run(self.fit, problem, meas, res)
+            expo, res = self.profile.run(self.fit, problem, meas, laws)
+            assert res.law.exponent_index is not None
             expo["term_index"] = int(res.law.exponent_index)
             expo["cv_interval"] = (math.nan, math.nan)
             expo["cv_bounded"] = False
+        else:
+            res = min(laws, key=_bic)
         return res, expo
 
+
+    def _onsets(self, problem: JointProblem, meas: MeasuredHarmonics,
+                res: OutputErrorResult) -> OutputErrorResult:
+        """Starts at ``n_onsets`` contact onsets across the allowed range; the best fit.
+
+        ``a0`` and the exponent trade along a valley with more than one basin (measured: the
+        equation-error start at 4x the true ``a0`` converged there, 90 chi2 units above the
+        true law's basin); every start keeps the contact force at the deepest indentation
+        (its coefficient rescaled)."""
+        if self.n_onsets <= 0:
+            return res
+        lo, hi = problem.a0_range
+        zmin = problem.z_min()
+        h = res.law.n_head
+        ei = res.law.exponent_index
+        best = res
+        for a in np.geomspace(lo, hi, self.n_onsets + 2)[1:-1]:
+            if abs(math.log(a / res.a0)) < 0.2:
+                continue
+            u0 = res.u.copy()
+            u0[3] = a
+            if ei is not None:
+                d_old, d_new = max(res.a0 - zmin, 1e-6), max(a - zmin, 1e-6)
+                u0[h + ei] *= (d_old / d_new) ** float(res.u[4])
+            r, _ = self.fit.solve(problem, meas, res.law, u0, max_nfev=self.onset_nfev)
+            if r.converged and r.chi2 < best.chi2:
+                best = r
+        if best is not res:
+            best, _ = self.fit.solve(problem, meas, best.law, best.u)
+        return best
 
     def _restart(self, problem: JointProblem, meas: MeasuredHarmonics,
                  failed: OutputErrorResult) -> OutputErrorResult:

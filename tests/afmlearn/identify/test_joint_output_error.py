@@ -119,7 +119,7 @@ def _exponent_fit(path: Path) -> tuple[float, dict]:
     assert res.converged
     # every orbit fitted to about the noise (a right law; the dispersion enters the level)
     assert res.chi2 / res.dof < 1.3
-    prof, best = OutputErrorProfile(step=0.2, max_nfev=12).run(fit, pb, meas, res)
+    prof, best = OutputErrorProfile(step=0.2, max_nfev=12).run(fit, pb, meas, [res])
     return float(best.u[4]), prof
 
 
