@@ -411,8 +411,10 @@ def orbit(out: Path, *, threads: int, only: list[str], write: bool) -> str:
         verdict.append(f"- {s}: QRNN mean NRMSE {q:.4f} vs the better baseline ({best.upper()}) "
                        f"{base[best]:.4f} ({(q - base[best]) / base[best] * 100:+.1f} %), vs "
                        f"persistence {pers:.4f} ({(q - pers) / pers * 100:+.1f} %): "
-                       f"{'at least as accurate' if q <= base[best] * 1.01 else 'LESS accurate'}"
-                       f" than LSTM/GRU{' (within 1 %)' if q > base[best] else ''}.")
+                       + ("at least as accurate as LSTM and GRU." if q <= base[best] else
+                          "as accurate as the better baseline within 1 % (a tie)."
+                          if q <= base[best] * 1.01 else "LESS accurate than the better "
+                          "baseline."))
     n_id = int(results["qrnn"]["orbit"]["ID model"]["n_windows"])
     n_ood = int(results["qrnn"]["orbit"]["OOD model"]["n_windows"])
     body = f"""

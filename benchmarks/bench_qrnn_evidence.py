@@ -79,15 +79,18 @@ def _truth_share(path: Path) -> list[float]:
 
 def main(argv: list[str] | None = None) -> str:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--records", type=Path,
-                    default=ROOT / "outputs" / "bench_diagnose" / "series.jsonl")
+    ap.add_argument("--records", type=Path, nargs="+",
+                    default=[ROOT / "outputs" / "bench_diagnose" / n for n in
+                             ("series_before_D2.jsonl", "series_null.jsonl")],
+                    help="bench_diagnose --series record files (JSON lines; missing: skipped)")
     ap.add_argument("--weight", type=float, default=QRNN_WEIGHT)
     add_doc_flag(ap)
     args = ap.parse_args(argv)
     import torch
 
     torch.set_num_threads(1)
-    records = [json.loads(line) for line in args.records.read_text().splitlines() if line]
+    records = [json.loads(line) for f in args.records if f.is_file()
+               for line in f.read_text().splitlines() if line]
     records = [r for r in records if r.get("candidates") and "error" not in r]
     evidence: dict[str, CouplingEvidence] = {}
     shares: dict[str, list[float]] = {}
@@ -134,15 +137,17 @@ def main(argv: list[str] | None = None) -> str:
     out = nrmse > 0.1
     p_out = f"{prob[out].max():.2f}" if out.any() else "-"
     body = f"""
-Command: `python benchmarks/bench_qrnn_evidence.py --records {args.records.relative_to(ROOT)
-if args.records.is_relative_to(ROOT) else args.records}` (weight w = {args.weight:g}).
-Draws: the {len(evidence)} hidden-effect series (8 set-points, 200 samples per period, 1 %
-noise, 30 periods each; `afmlearn.diagnose.synthetic.hidden_series`) of `bench_diagnose.py
---series` and its {len(records)} diagnosed variants (1, 4 or 8 set-points, drive phase recorded
-or not), as recorded in that file; the decision is re-taken from the recorded per-cause
-evidence, gains and thresholds (sanity: {mismatch} of {len(records)} re-taken decisions without
-the QRNN differ from the recorded ones). "With QRNN": the higher_mode threshold lowered by
-2 x the log-odds of the network's calibrated probability (largest over the variant's
+Command: `python benchmarks/bench_qrnn_evidence.py --records {' '.join(
+    str(f.relative_to(ROOT)) if f.is_relative_to(ROOT) else str(f) for f in args.records)}`
+(weight w = {args.weight:g}). Draws: the {len(evidence)} hidden-effect series (8 set-points,
+200 samples per period, 1 % noise, 30 periods each; `afmlearn.diagnose.synthetic.hidden_series`)
+of `bench_diagnose.py --series` (effect draws of the previous code, and the null draws of the
+series null calibration running now) and their {len(records)} diagnosed variants (1, 4 or 8
+set-points, drive phase recorded or not), as recorded in those files. The decision is re-taken
+from the recorded per-cause evidence, gains and thresholds (sanity: {mismatch} of
+{len(records)} re-taken decisions without the QRNN differ from the recorded ones). "With
+QRNN": the higher_mode threshold lowered by 2 x the log-odds of the network's calibrated
+probability (largest over the variant's
 set-points, positive evidence only, weight {args.weight:g}).
 
 {table}

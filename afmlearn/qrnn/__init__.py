@@ -8,7 +8,8 @@ Data
     `DatasetSpec`, `generate_dataset` (simulated sweeps cached in HDF5), `SweepDataModule`
     (split by cantilever), `windows_from_trace` (recorded traces, no labels).
 Model, training, evaluation
-    `OrbitModule` with forecast strategies `DirectForecast`, `AutoregressiveForecast`;
+    `OrbitModule` with forecast strategies `DirectForecast`, `AutoregressiveForecast` and
+    orbit losses `PeriodNRMSELoss` (default), `MSEOrbitLoss`;
     `train(cfg)` (Hydra config ``conf/train_qrnn.yaml``), `export_checkpoint`, `evaluate`.
 Calibration and evidence for other analyses (issue 15)
     `coupling_probability` (calibrated probability per trace / set-point, `CouplingEvidence`),
@@ -66,6 +67,7 @@ from afmlearn.qrnn.layer import (
     QRNNCarry,
     QRNNLayer,
 )
+from afmlearn.qrnn.losses import AbstractOrbitLoss, MSEOrbitLoss, PeriodNRMSELoss
 from afmlearn.qrnn.module import OrbitModule
 from afmlearn.qrnn.networks import AbstractSequenceNet, GRUNet, LSTMNet, QRNNNet
 from afmlearn.qrnn.scan import (
@@ -85,6 +87,7 @@ __all__ = [
     "DEFAULT_CHECKPOINT",
     "QRNN",
     "AbstractForecast",
+    "AbstractOrbitLoss",
     "AbstractPooling",
     "AbstractScan",
     "AbstractSequenceNet",
@@ -102,7 +105,9 @@ __all__ = [
     "IFOPooling",
     "IsotonicCalibrator",
     "LSTMNet",
+    "MSEOrbitLoss",
     "OrbitModule",
+    "PeriodNRMSELoss",
     "PlattCalibrator",
     "QRNNCarry",
     "QRNNLayer",
