@@ -160,7 +160,8 @@ def run_one(job: dict) -> dict:
                           sample_rate_hz=d["sample_rate_hz"], quality_factor=Q,
                           spring_constant_n_per_m=K, resonance_frequency_hz=F0)
     t1 = time.perf_counter()
-    diag = CurveDiagnoser(lockin=case["truth"]["lockin"]).fit(curve)
+    diag = CurveDiagnoser(lockin=case["truth"]["lockin"],
+                          max_evaluations=job.get("max_evaluations")).fit(curve)
     t_fit = time.perf_counter() - t1
     errs = force_errors(diag, d, case["truth"])
     return {**job, "named": diag.cause_, "gain": diag.gain_, "confidence": diag.confidence_,
@@ -310,6 +311,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--causes", default=",".join(CAUSES))
     ap.add_argument("--records", default=str(ROOT / "outputs" / "bench_curves.jsonl"))
     ap.add_argument("--note", default="", help="a line appended to the section")
+    ap.add_argument("--max-evaluations", type=int, default=None,
+                    help="forward-model evaluations per curve (CurveDiagnoser cap)")
     ap.add_argument("--report-only", action="store_true",
                     help="no new curves: the section from the records so far")
     ap.add_argument("--oracle", action="store_true",
@@ -322,7 +325,7 @@ def main(argv: list[str] | None = None) -> int:
     path.parent.mkdir(parents=True, exist_ok=True)
     done = {(r["cause"], r["index"]) for r in load(path)}
     jobs = [{"cause": c, "index": i, "seed": args.seed, "periods": args.periods,
-             "every": args.every}
+             "every": args.every, "max_evaluations": args.max_evaluations}
             for i in range(args.per_cause) for c in args.causes.split(",")]
     order = np.random.default_rng(args.seed).permutation(len(jobs))
     for k in order:
