@@ -632,7 +632,8 @@ def fit_joint(problem: JointProblem, library: AFMLibrary, *,
         oe, expo = output_error.run(problem, lib_s, a0_s, coef, dominant,
                                     [*_contact_pair(library),
                                      *_later_terms(cands, ki, des.library, n_lin)],
-                                    baseline=_contact_pair(library))
+                                    baseline=_contact_pair(library),
+                                    linear=lambda lib, a: support_fit(problem, lib, a)[0])
         if oe is None:
             say("output error: an orbit of the equation-error law was not found; kept it")
     if oe is not None:
