@@ -54,6 +54,9 @@ class CurveDiagnoser:
         Time step of the slow flow (dimensionless, see :class:`CurveFitter`).
     n_starts : int
         Starts of the baseline fit (see :class:`CurveFitter`).
+    extension_starts : int
+        Refinements of each extension, from the best points of its start grid (1; 2 did not
+        rescue the far-field damping case of the tests and costs a third more).
     max_evaluations : int or None
         Cap on the forward-model evaluations of the whole diagnosis (time per curve = this
         times the cost of one evaluation): half for the baseline at most, the rest shared
@@ -77,7 +80,7 @@ class CurveDiagnoser:
                  threshold: float = 10.0, a0_m: float = 0.3e-9, tip_radius_m: float = 10e-9,
                  lockin: LockIn | None = None, max_nfev: int = 12,
                  step: float = 4.0 * math.pi, n_starts: int = 1,
-                 max_evaluations: int | None = None) -> None:
+                 extension_starts: int = 1, max_evaluations: int | None = None) -> None:
         if not all(isinstance(h, Hypothesis) for h in hypotheses):
             raise ValueError("hypotheses must be Hypothesis objects")
         if not (math.isfinite(threshold) and threshold >= 0.0):
@@ -90,6 +93,9 @@ class CurveDiagnoser:
         self.max_nfev = int(max_nfev)
         self.step = float(step)
         self.n_starts = int(n_starts)
+        if int(extension_starts) < 1:
+            raise ValueError(f"extension_starts must be >= 1, got {extension_starts!r}")
+        self.extension_starts = int(extension_starts)
         if max_evaluations is not None and int(max_evaluations) < 2:
             raise ValueError(f"max_evaluations must be >= 2 or None, got {max_evaluations!r}")
         self.max_evaluations = None if max_evaluations is None else int(max_evaluations)
@@ -113,7 +119,7 @@ class CurveDiagnoser:
                     (2 - round_) * len(self.hypotheses) - i)))
                 f = CurveFitter(hypothesis=h, start=self.baseline_.values_,
                                 max_nfev=self.max_nfev, max_evaluations=share,
-                                **opts).fit(curve, mask=fit_mask)
+                                n_starts=self.extension_starts, **opts).fit(curve, mask=fit_mask)
                 spent += f.n_evaluations_
                 old = self.fits_.get(h.cause)
                 if old is None or f.chi2_ < old.chi2_:

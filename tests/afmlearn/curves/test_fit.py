@@ -81,12 +81,18 @@ def test_conservative_law_dissipates_nothing():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("cause,law,drift", [
-    pytest.param("none", TRUTH, 0.0, marks=pytest.mark.xfail(
-        strict=True, reason="measured false positive: the baseline stops in a local minimum "
-        "near the jump and an extension, refitted from it, escapes it (docs/curves.md)")),
+    # once a measured false positive (an extension escaping the baseline's local minimum near
+    # the jump); the diagnoser now refits the baseline from such a solution
+    ("none", TRUTH, 0.0),
     # far-field damping (decay over two free amplitudes); a decay of 0.3 free amplitudes,
     # active only near contact, was named viscoelastic (measured confusion)
-    ("long_range_damping", TRUTH.replace(damping=1e-3, decay_length=2.0), 0.0),
+    pytest.param("long_range_damping", TRUTH.replace(damping=1e-3, decay_length=2.0), 0.0,
+                 marks=pytest.mark.xfail(strict=True, reason=(
+                     "measured: named electrostatic. The baseline refined from the true "
+                     "surface and attraction reaches chi2 188 on 240 residuals (the damping "
+                     "is nearly invisible here) but the diagnoser's baseline stops at 514, "
+                     "and an electrostatic tail bridges more of that gap than the damping "
+                     "fit, which lands on a near-contact decay (docs/curves.md, Limits)"))),
     ("viscoelastic", TRUTH.replace(visco=2.0), 0.0),
 ])
 def test_diagnoser_names_the_hidden_cause(cause, law, drift):
