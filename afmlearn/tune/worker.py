@@ -7,7 +7,10 @@ parameters are retried (see :mod:`afmlearn.tune.storage`).
 
 Each round a worker
 
-1. fails stale trials (``optuna.storages.fail_stale_trials``: their retries are queued),
+1. fails stale trials (``optuna.storages.fail_stale_trials``: their retries are queued), and
+   also a trial that is ``RUNNING`` without any heartbeat and started more than the grace
+   period ago (its process died between ``study.ask()`` and its first heartbeat, which
+   Optuna's check never fails),
 2. stops if ``n_trials`` trials are finished; waits if the remaining ones are all running
    (they may still die and need a retry),
 3. asks for a trial (a queued retry first) and claims a slot: among the running trials, the
@@ -23,16 +26,19 @@ resumed or parallel study draws new points instead of repeating the first ones.
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from datetime import datetime, timedelta
 from typing import final
 
 import optuna
-from optuna.storages import fail_stale_trials
+from optuna.storages import RDBStorage, fail_stale_trials
+from optuna.storages._rdb import models
 from optuna.trial import TrialState
 
 from .heartbeat import Heartbeat
@@ -75,6 +81,50 @@ def _counts(study: optuna.Study) -> tuple[int, list[int]]:
     trials = study.get_trials(deepcopy=False, states=(*FINISHED, TrialState.RUNNING))
     finished = sum(t.state in FINISHED for t in trials)
     return finished, sorted(t.number for t in trials if t.state == TrialState.RUNNING)
+
+
+def _fail_without_heartbeat(study: optuna.Study) -> list[int]:
+    """Fail ``RUNNING`` trials with no heartbeat record that started over the grace period ago.
+
+    Such a trial's process died between ``study.ask()`` and its first heartbeat; Optuna's
+    :func:`~optuna.storages.fail_stale_trials` only looks at trials with a heartbeat, so the
+    study would wait for it forever. It is failed like a heartbeat-stale trial: the storage's
+    stale-trial callback queues its retry. The start time is Optuna's (the asking process's
+    local clock), compared with this process's clock. Returns the numbers of the trials failed.
+    """
+    storage = study._storage  # an RDBStorage, wrapped by Optuna in a cache
+    rdb = getattr(storage, "_backend", storage)
+    if not isinstance(rdb, RDBStorage) or rdb.heartbeat_interval is None:
+        return []
+    grace = rdb.grace_period or 2 * rdb.heartbeat_interval
+    cutoff = datetime.now() - timedelta(seconds=grace)
+    session = rdb.scoped_session()
+    try:
+        ids = [row[0] for row in session.query(models.TrialModel.trial_id)
+               .filter(models.TrialModel.study_id == study._study_id)
+               .filter(models.TrialModel.state == TrialState.RUNNING)
+               .filter(~models.TrialModel.heartbeats.any()).all()]
+        session.commit()
+    finally:
+        session.close()
+    callback = storage.get_heartbeat_stale_trial_callback()
+    failed = []
+    for trial_id in ids:
+        start = storage.get_trial(trial_id).datetime_start  # local time, as Optuna reports it
+        if start is None or start >= cutoff:
+            continue
+        try:
+            if not storage.set_trial_state_values(trial_id, state=TrialState.FAIL):
+                continue
+        except optuna.exceptions.UpdateFinishedTrialError:  # finished or failed elsewhere
+            continue
+        trial = copy.deepcopy(storage.get_trial(trial_id))
+        log.warning("trial %d has been running for over %g s without a heartbeat (its worker "
+                    "died before the first one): failed", trial.number, grace)
+        failed.append(trial.number)
+        if callback is not None:
+            callback(study, trial)
+    return failed
 
 
 def _values(value: float | Sequence[float], n_objectives: int) -> list[float]:
@@ -130,6 +180,7 @@ def run_worker(study: optuna.Study, objective: Objective, *, n_trials: int,
         with warnings.catch_warnings():  # "experimental" since Optuna 2.9; and we do not use
             warnings.simplefilter("ignore")  # Study.optimize, which the heartbeat warns about
             fail_stale_trials(study)
+        _fail_without_heartbeat(study)
         finished, running = _counts(study)
         if finished >= n_trials:
             break

@@ -66,6 +66,31 @@ def test_dead_trial_is_failed_and_retried_with_its_parameters(tmp_path: Path) ->
     assert len(retry) == 1 and retry[0].params["x"] == x_dead
 
 
+@pytest.mark.filterwarnings("ignore:Heartbeat of storage")
+def test_trial_killed_before_its_first_heartbeat_is_failed_and_retried(tmp_path: Path) -> None:
+    """A worker killed between ``ask`` and its first heartbeat: RUNNING with no heartbeat."""
+    storage = open_storage(f"sqlite:///{tmp_path / 's.db'}", heartbeat_interval=1,
+                           grace_period=2)
+    study = open_study(storage, study_name="s", directions=["minimize"])
+    orphan = study.ask({"x": FloatDistribution(-3.0, 3.0)})  # no heartbeat, ever
+    x_orphan = orphan.params["x"]
+    t0 = time.monotonic()
+    results = []  # in a thread: without the fix the worker waits for the orphan forever
+    worker = threading.Thread(target=lambda: results.append(
+        run_worker(study, _objective, n_trials=3, poll_interval=0.1)), daemon=True)
+    worker.start()
+    worker.join(timeout=30.0)
+    assert not worker.is_alive(), "the worker still waits for the trial without a heartbeat"
+    result = results[0]
+    assert time.monotonic() - t0 >= 2.0  # not failed before the grace period
+    assert study.trials[orphan.number].state == TrialState.FAIL
+    finished = study.get_trials(states=FINISHED)
+    assert len(finished) == 3 == result.complete
+    assert not study.get_trials(states=(TrialState.RUNNING, TrialState.WAITING))
+    retry = [t for t in finished if t.system_attrs.get("failed_trial") == orphan.number]
+    assert len(retry) == 1 and retry[0].params["x"] == x_orphan
+
+
 def test_nan_and_errors_fail_and_stop_after_max_failures(tmp_path: Path) -> None:
     storage = open_storage(f"sqlite:///{tmp_path / 's.db'}", heartbeat_interval=1)
     study = open_study(storage, study_name="s", directions=["minimize"])
