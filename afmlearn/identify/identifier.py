@@ -22,6 +22,7 @@ physical signs of the terms hold in every fit of both paths.
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import Any, final
 
@@ -59,6 +60,8 @@ from .single import (
 from .single_outputs import orbit_force, orbit_summary
 from .single_problem import N_LIN, build_orbit_problem
 from .summary import force_vs_gap, summarize
+
+log = logging.getLogger(__name__)
 
 __all__ = ["ForceIdentifier", "LINEAR_TERMS", "force_vs_gap", "summarize"]
 
@@ -130,7 +133,8 @@ class ForceIdentifier:
     seed : int
         Seed of the bootstrap.
     progress : bool
-        Print the stages to stderr.
+        Log the stages (logger ``afmlearn.identify.identifier``, level INFO; the Hydra scripts'
+        job logging shows INFO on the console and in the run's log file).
 
     Attributes
     ----------
@@ -242,9 +246,7 @@ class ForceIdentifier:
 
     def _log(self, msg: str) -> None:
         if self.progress:
-            import sys
-            import time
-            print(f"[identify {time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
+            log.info(msg)
 
     # ------------------------------------------------------------------ joint fit
     def fit_joint(self, data: Experiment | Trace) -> ForceIdentifier:
