@@ -20,7 +20,7 @@ sweep (``docs/figures/qrnn_hidden_units.png``) and an orbit-prediction example
     python benchmarks/bench_qrnn_accuracy.py --orbit [--only qrnn,lstm,gru]
 
 ``--orbit`` (issue 15) trains the QRNN with the shipped recipe (``experiment=qrnn_default``: the
-issue-15 data, at most 12 epochs with early stopping, seed 0, 1 thread) and LSTM and GRU of the
+issue-15 data, at most 16 epochs with early stopping, seed 0, 1 thread) and LSTM and GRU of the
 same size with the identical recipe (data, epochs, early stopping, read-out, heads, loss,
 optimiser), and reports forecast NRMSE per period and the valid prediction time on the held-out
 cantilevers (ID) and on the out-of-distribution set, next to the persistence forecast, in one
@@ -420,7 +420,7 @@ def orbit(out: Path, *, threads: int, only: list[str], write: bool) -> str:
     body = f"""
 Command: `python benchmarks/bench_qrnn_accuracy.py --orbit` (resumable; run with `nice -n 10`).
 Every network is trained by the shipped recipe (`python scripts/train_qrnn.py
-experiment=qrnn_default`, seed 0): the issue-15 data (`conf/data/qrnn.yaml`), at most 12 epochs
+experiment=qrnn_default`, seed 0): the issue-15 data (`conf/data/qrnn.yaml`), at most 16 epochs
 with early stopping (patience 4) on `val/loss`, the best epoch, 1 torch thread; 2 layers x 64
 units each, the same read-out (a correction to the repeated input period, starting at zero),
 coupling head, loss (per-window NRMSE of the forecast + coupling BCE) and optimiser (AdamW,

@@ -21,7 +21,7 @@ from typing import Any, final
 import numpy as np
 from numpy.typing import NDArray
 
-from afmlearn.io import Experiment, Trace
+from afmlearn.io import Experiment, Trace, read_trace
 from afmlearn.qrnn.infer import DEFAULT_CHECKPOINT, calibration_of, load_module, predict_trace
 
 __all__ = ["CouplingEvidence", "coupling_probability"]
@@ -39,7 +39,8 @@ class CouplingEvidence:
         sweep point or the trace), calibrated; the raw mean window score when
         ``calibrated`` is False.
     flag : ndarray of bool, shape (n_obs,)
-        ``probability >= threshold``.
+        ``probability >= threshold`` and driven inside the checkpoint's training band
+        (:func:`afmlearn.qrnn.infer.training_band`).
     raw_score : ndarray, shape (n_obs,)
         Mean window score of the network (uncalibrated; ranks but is not a probability).
     forecast_nrmse : ndarray, shape (n_obs,)
@@ -137,7 +138,9 @@ def coupling_probability(recording: Trace | Experiment | str | os.PathLike[str],
     path = str(Path(checkpoint if checkpoint is not None else DEFAULT_CHECKPOINT).resolve())
     module, run = _cached_module(path)
     if isinstance(recording, str | os.PathLike):
-        recording = Experiment.read(recording)
+        # one trace with its rows (a sweep keeps its kind and calibration; an Experiment
+        # would split it into single steady records)
+        recording = read_trace(recording)
     if isinstance(recording, Experiment):
         observations = list(recording)
     elif isinstance(recording, Trace):
@@ -165,7 +168,7 @@ def coupling_probability(recording: Trace | Experiment | str | os.PathLike[str],
     assert summary is not None  # an Experiment holds at least one observation
     prob = np.array([r["score"] for r in rows])
     return CouplingEvidence(
-        probability=prob, flag=prob >= threshold,
+        probability=prob, flag=np.array([bool(r["flag"]) for r in rows]),
         raw_score=np.array([r["raw_score"] for r in rows]),
         forecast_nrmse=np.array([r["forecast_nrmse_per_period"][0] for r in rows]),
         gap_m=np.array([r["gap_m"] for r in rows]),

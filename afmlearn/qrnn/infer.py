@@ -127,6 +127,18 @@ def calibration_of(run: dict[str, Any], kind: str | None = None
     return CouplingCalibration.from_dict(data) if data else None
 
 
+def training_band(run: dict[str, Any]) -> tuple[float, float]:
+    """Drive frequencies ``(lo, hi)`` / f0 the checkpoint was trained on (sweeps and set-point
+    series of its data spec; DatasetSpec defaults where the spec leaves them out)."""
+    from afmlearn.qrnn.datagen import DatasetSpec
+
+    spec = dict((run.get("config") or {}).get("data", {}).get("spec") or {})
+    d = DatasetSpec()
+    series = spec.get("series_omega_range", d.series_omega_range)
+    return (float(min(spec.get("omega_start", d.omega_start), series[0])),
+            float(max(spec.get("omega_stop", d.omega_stop), series[1])))
+
+
 def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
                   run: dict[str, Any], *, threshold: float | None = None) -> dict[str, Any]:
     """Scores, flags, sweet-spot intervals and forecasts of one trace, sweep or set-point
@@ -150,7 +162,11 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
         (``windows`` of :func:`windows_from_trace`, ``pred`` (N, horizon P) normalised forecast,
         ``coupled``, ``sweet`` (N,) window scores). A trace's ``score`` is the calibrated
         probability of coupling when the checkpoint is calibrated (``raw_score``: the mean
-        window score); the sweet-spot interval uses the raw sweet score at 0.5.
+        window score); the sweet-spot interval uses the raw sweet score at 0.5. A trace driven
+        outside the checkpoint's training band (:func:`training_band`) is scored but never
+        flagged (``in_band`` False): e.g. the dissertation's sweet-spot sweep up to 1.13 f0 got
+        76 false flags of 251 uncoupled points at 1.03-1.13 f0 with the sweep threshold, none
+        inside the band.
     """
     if not isinstance(trace, Trace):
         trace = read_trace(trace)          # labels=False: /labels is never opened
@@ -176,14 +192,17 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
     err = nrmse_per_period(pred, win["y"].astype(float), horizon=horizon)
     f0 = trace.resonance_frequency_hz
     f_rows = np.asarray(win["omega_rows"], dtype=float) * f0
+    lo, hi = training_band(run)
     traces = []
     for i, r in enumerate(rows):
         sel = win["row"] == r
+        in_band = bool(lo - 1e-9 <= float(win["omega_rows"][r]) <= hi + 1e-9)
         traces.append({
             "row": int(r), "drive_frequency_hz": float(f_rows[r]),
             "omega": float(win["omega_rows"][r]), "score": float(score[i]),
             "raw_score": float(raw[i]),
-            "flag": bool(score[i] >= threshold), "sweet_score": float(sweet_score[i]),
+            "flag": bool(score[i] >= threshold and in_band), "in_band": in_band,
+            "sweet_score": float(sweet_score[i]),
             "n_windows": int(sel.sum()),
             "forecast_nrmse_per_period": [float(v) for v in err[sel].mean(axis=0)],
         })
@@ -192,6 +211,7 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
     summary: dict[str, Any] = {
         "is_sweep": bool(trace.is_sweep), "is_series": bool(trace.is_series),
         "n_traces": len(traces), "threshold": float(threshold),
+        "drive_band": [lo, hi], "n_out_of_band": sum(not t["in_band"] for t in traces),
         "calibrated": cal is not None,
         "false_flag_rate": None if cal is None else cal.false_flag_rate,
         "traces": traces,
@@ -209,7 +229,7 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
     elif trace.is_series:
         summary["flagged_fraction"] = float(np.mean([t["flag"] for t in traces]))
         summary["score"] = float(np.max(score))
-        summary["flag"] = bool(summary["score"] >= threshold)
+        summary["flag"] = any(t["flag"] for t in traces)
         summary["sweet_spot"] = None
     else:
         summary["score"] = traces[0]["score"]
@@ -313,24 +333,27 @@ def coupling_summary(trace: Trace | str | os.PathLike[str], *,
     what = "probability" if s["calibrated"] else "score"
     rule = (f"threshold {threshold:.3g}" + (f" for {s['false_flag_rate']:.0%} false flags"
                                            if s["calibrated"] else ""))
+    lo, hi = s["drive_band"]
+    band = (f"; {s['n_out_of_band']} driven outside the training band {lo:.3f}-{hi:.3f} f0: "
+            "scored, never flagged" if s["n_out_of_band"] else "")
     if not s["is_sweep"] and not s["is_series"]:
         t = s["traces"][0]
         return (f"{head} {what} {t['score']:.3f} -> "
-                f"{'coupled' if t['flag'] else 'not coupled'} ({rule}), "
+                f"{'coupled' if t['flag'] else 'not coupled'} ({rule}{band}), "
                 f"drive {t['drive_frequency_hz'] / 1e3:.3f} kHz")
     if s["is_series"]:
         lines = [head]
         for t in s["traces"]:
             lines.append(f"  set-point gap {t['gap_m'] * 1e9:.2f} nm: {what} {t['score']:.3f} -> "
                          f"{'coupled' if t['flag'] else 'not coupled'}")
-        lines.append(f"  ({rule})")
+        lines.append(f"  ({rule}{band})")
         return "\n".join(lines)
     lines = [head]
     scores = np.array([t["score"] for t in s["traces"]])
     k = int(np.argmax(scores))
     n_flagged = sum(t["flag"] for t in s["traces"])
     lines.append(f"  {s['n_traces']} sweep points, {n_flagged} flagged coupled "
-                 f"({what} >= {threshold:.3g}); max {what} {scores[k]:.3f} at "
+                 f"({what} >= {threshold:.3g}{band}); max {what} {scores[k]:.3f} at "
                  f"{s['traces'][k]['drive_frequency_hz'] / 1e3:.3f} kHz")
     for spot in s["sweet_spot"]:
         iv = spot["interval_hz"]

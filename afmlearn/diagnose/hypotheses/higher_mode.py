@@ -37,8 +37,8 @@ __all__ = ["HigherMode", "qrnn_log_odds", "QRNN_WEIGHT", "QRNN_MAX_FORECAST_NRMS
 
 #: weight of the QRNN's log likelihood ratio in the decision: the slope of a logistic fit of
 #: the coupled label on max(0, LLR) over the out-of-distribution set-points (288 steady records
-#: of a cantilever family / excitation never trained on: 0.90; on the in-distribution test
-#: set-points 2.9, validation 2.6; two-sided LLR: 0.69 / 1.23 / 1.50), i.e. the least trusting
+#: of a cantilever family / excitation never trained on: 0.91; on the in-distribution test
+#: set-points 2.8, validation 2.5; two-sided LLR: 0.68 / 1.22 / 1.56), i.e. the least trusting
 #: of the measured slopes, on the kind of record the diagnosis reads (docs/qrnn.md section 3b)
 QRNN_WEIGHT = 0.9
 #: an observation the network forecasts worse than this (NRMSE of the next period) is outside

@@ -169,3 +169,22 @@ def test_cli_refuses_a_clipped_trace_with_one_line(tiny_run, tmp_path, monkeypat
     assert exc.value.code == 2
     assert len(err) == 1 and err[0].startswith("error:") and "clipped" in err[0]
     assert not (tmp_path / "out" / "coupling.json").exists()
+
+
+def test_traces_outside_the_training_band_are_never_flagged(tiny_run, tmp_path):
+    """Scored, but not flagged: drive 1.05-1.10 f0 lies outside the trained 0.985-1.03."""
+    from afmlearn.qrnn.infer import predict_trace, training_band
+
+    module, run, _ = load_module(tiny_run["checkpoint"])
+    lo, hi = training_band(run)
+    assert lo <= 0.99 and hi >= 1.02
+    inside = predict_trace(_sweep(), module, run, threshold=1e-6)["summary"]
+    assert inside["n_out_of_band"] == 0 and all(t["flag"] for t in inside["traces"])
+    far = _sweep()
+    far = Trace(far.deflection_m, sample_rate_hz=FS, spring_constant_n_per_m=40.0,
+                quality_factor=400.0, resonance_frequency_hz=F0,
+                drive_frequency_hz=np.linspace(1.05, 1.10, 6) * F0, gap_m=12e-9)
+    out = predict_trace(far, module, run, threshold=1e-6)["summary"]
+    assert out["n_out_of_band"] == 6 and not any(t["flag"] for t in out["traces"])
+    assert all(t["score"] > 1e-6 for t in out["traces"])          # still scored
+    assert "never flagged" in coupling_summary(far, checkpoint=tiny_run["checkpoint"])
