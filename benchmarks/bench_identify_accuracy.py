@@ -523,7 +523,8 @@ def main_joint(argv: list[str] | None = None) -> str:
         iv = rec["interval"]
         err = None if rec["exponent"] is None else rec["exponent"] - p
         rows.append([p, setting.replace("_", ", ").replace("pct", " %"),
-                     "output error" if stage == "oe" else f"equation error ({rec['git']})",
+                     "output error" if stage == "oe"
+                     else f"equation error ({rec.get('git') or 'earlier run'})",
                      "recorded" if recorded else "fitted", n,
                      "—" if rec["exponent"] is None else f"{rec['exponent']:.3f}",
                      "—" if err is None else f"{err:+.3f}",
@@ -540,14 +541,23 @@ def main_joint(argv: list[str] | None = None) -> str:
                         "repulsive %", "attractive %", "near a0 %", "fit [s] (load)"], rows)
     body = f"""
 `ForceIdentifier(drive_phase=RecordedPhase() | FittedPhase(), n_bootstrap=0).fit_joint(...)`
-(afmlearn.identify.joint: one law over all set-points, harmonic-balance rows whitened per
-set-point, gap offsets per set-point, exponent profile on block-mean rows) on set-point series
+(afmlearn.identify.joint: one law over all set-points). "fit": "output error" = the joint fit
+with its output-error stage (afmlearn.identify.output_error: every set-point's periodic orbit
+simulated from the law by shooting on the one kernel and compared with its measured harmonics;
+exponent profile over that objective, lower envelope over the selected and the baseline law);
+"equation error (git)" = records of the joint fit before that stage (harmonic-balance rows
+whitened per set-point, gap offsets, exponent profile on block-mean rows), kept from the run
+at that commit and not re-run. "fit [s] (load)": wall time of one identification and the
+1-min load average when the record was written (older records: load not recorded). Set-point
+series
 simulated row by row with `scenario=steady` at rest gaps {JOINT_GAPS} L_ref (free amplitude
 1.5 L_ref; settle 1200 periods plus a random fraction: a random drive phase per row),
 {args.periods} recorded periods per row, seed 0. The 1- and 4-set-point experiments are
 subsets {JOINT_SUBSETS[1]} and {JOINT_SUBSETS[4]} of the SAME 8 rows. p = 1.5: `force=dmt`;
 p = 2, 2.27: `force=dmt_cone` matched to the sphere at an indentation of {DELTA_MATCH} L_ref.
-"95 % interval": profile likelihood on block-mean rows; "CV interval": exponents whose
+"95 % interval": profile likelihood (output error: where chi² rises 3.841 x max(1,
+chi²/dof) above its minimum; equation error: on block-mean rows); "CV interval" (equation
+error only): exponents whose
 rolling cross-validation error over unseen set-points is within one paired standard error
 of the best (`ExponentProfile`; for one set-point the folds are blocks of periods).
 "recorded": the rows' drive_phase_rad with a 0.01 rad prior; "fitted": removed from the

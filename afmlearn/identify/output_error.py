@@ -626,21 +626,26 @@ class OutputErrorProfile:
         return pts
 
     def run(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
-            starts: list[OutputErrorResult]) -> tuple[dict[str, Any], OutputErrorResult]:
+            starts: list[OutputErrorResult],
+            points: dict[float, OutputErrorResult] | None = None
+            ) -> tuple[dict[str, Any], OutputErrorResult]:
         """The profile table and interval over the laws of ``starts`` (each with a contact
         exponent), and the best solution found.
 
         Each law is profiled on its own; the profile of the exponent is their lower envelope
         in ``chi2 + n_u log(n_residuals)`` (the laws may differ in their number of terms), and
         a profile point better than every start is re-fitted with the exponent free.
+        ``points``: further fixed-exponent fits (e.g. a scan's), merged into the envelope.
         """
         starts = [r for r in starts if r.law.exponent_index is not None]
         assert starts
         env: dict[float, tuple[float, OutputErrorResult]] = {}
-        for st in starts:
-            for p, r in self._walk(fit, problem, meas, st).items():
+        walks = [self._walk(fit, problem, meas, st) for st in starts]
+        for pts in [*walks, dict(points or {})]:
+            for p, r in pts.items():
+                p = round(float(p), 6)
                 sc = _bic(r)
-                if p not in env or sc < env[p][0]:
+                if math.isfinite(sc) and (p not in env or sc < env[p][0]):
                     env[p] = (sc, r)
         best = min(starts, key=_bic)
         k_min = min(env, key=lambda k: env[k][0])
@@ -804,6 +809,7 @@ class OutputErrorStage:
         res = self._onsets(problem, meas, res)
         ei = res.law.exponent_index
         laws = []
+        points: dict[float, OutputErrorResult] = {}
         if baseline and ei is not None:
             h = res.law.n_head
             law_b = OutputErrorLaw(library=AFMLibrary([res.law.library.terms[ei], *baseline]),
@@ -811,7 +817,7 @@ class OutputErrorStage:
             if set(law_b.library.names) != set(res.law.library.names):
                 u_b = np.concatenate([res.u[:h], [res.u[h + ei]],
                                       _small(problem, res, baseline)])
-                rb = self._scan(problem, meas, law_b, u_b, linear)
+                rb = self._scan(problem, meas, law_b, u_b, linear, points)
                 if rb is not None:
                     laws.append(rb)
         if self.support is not None:
@@ -820,7 +826,7 @@ class OutputErrorStage:
                        if set(r.law.library.names) != set(res.law.library.names))]
         expo = None
         if self.profile is not None and res.law.exponent_index is not None:
-            expo, res = self.profile.run(self.fit, problem, meas, laws)
+            expo, res = self.profile.run(self.fit, problem, meas, laws, points)
             assert res.law.exponent_index is not None
             expo["term_index"] = int(res.law.exponent_index)
             expo["cv_interval"] = (math.nan, math.nan)
@@ -831,8 +837,8 @@ class OutputErrorStage:
 
 
     def _scan(self, problem: JointProblem, meas: MeasuredHarmonics, law: OutputErrorLaw,
-              u: FloatArray, linear: Callable[[AFMLibrary, float], FloatArray] | None = None
-              ) -> OutputErrorResult | None:
+              u: FloatArray, linear: Callable[[AFMLibrary, float], FloatArray] | None,
+              points: dict[float, OutputErrorResult]) -> OutputErrorResult | None:
         """A coarse global start for ``law`` (contact exponent at index 0 of its terms): the
         exponents ``scan_exponents`` x the contact onsets of :meth:`_onsets`, each a short fit
         at fixed exponent (the contact coefficient rescaled to keep the force at the deepest
@@ -841,13 +847,15 @@ class OutputErrorStage:
         local fit from a steeper law's estimate does not cross (measured on the benchmark's
         DMT series: it ended at ``p`` 2.1 with no adhesion, 4.6 chi² above the true law).
         With ``linear`` the coefficients of every start come from the equation-error fit at
-        its ``(p, a0)``."""
+        its ``(p, a0)``. Each scanned exponent's best fit, converged at that exponent, is
+        stored in ``points`` (profile points)."""
         lo, hi = problem.a0_range
         zmin = problem.z_min()
         h = law.n_head
         d0 = max(float(u[3]) - zmin, 1e-6)
         best: OutputErrorResult | None = None
         for p in self.scan_exponents:
+            best_p: OutputErrorResult | None = None
             for a in np.geomspace(lo, hi, self.n_onsets + 2)[1:-1]:
                 u0 = u.copy()
                 u0[3], u0[4] = a, p
@@ -862,8 +870,17 @@ class OutputErrorStage:
                         u0[h:] = c
                 r, _ = self.fit.solve(problem, meas, law, u0, fixed={4: float(p)},
                                       max_nfev=self.scan_nfev)
-                if r.converged and (best is None or r.chi2 < best.chi2):
-                    best = r
+                if r.converged and (best_p is None or r.chi2 < best_p.chi2):
+                    best_p = r
+            if best_p is None:
+                continue
+            # the exponent's best basin, converged: a point of its profile (any fixed-p fit
+            # bounds the profile from above; a walk from one basin can miss another)
+            r, _ = self.fit.solve(problem, meas, law, best_p.u, fixed={4: float(p)})
+            best_p = r if r.converged and r.chi2 <= best_p.chi2 else best_p
+            points[float(p)] = best_p
+            if best is None or best_p.chi2 < best.chi2:
+                best = best_p
         if best is None:
             return None
         r, _ = self.fit.solve(problem, meas, law, best.u)
