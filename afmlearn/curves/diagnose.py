@@ -59,8 +59,9 @@ class CurveDiagnoser:
         rescue the far-field damping case of the tests and costs a third more).
     max_evaluations : int or None
         Cap on the forward-model evaluations of the whole diagnosis (time per curve = this
-        times the cost of one evaluation): half for the baseline at most, the rest shared
-        equally by the extensions still to fit. None: no cap.
+        times the cost of one evaluation): half for the baseline at most; the extensions share
+        up to 80 % of the whole equally, the rest is left for refitting a stuck baseline and
+        the extensions from it. None: no cap.
 
     Attributes
     ----------
@@ -115,8 +116,12 @@ class CurveDiagnoser:
         self.fits_: dict[str, CurveFitter] = {}
         for round_ in range(2):
             for i, h in enumerate(self.hypotheses):
-                share = (None if budget is None else max(1, (budget - spent) // (
-                    (2 - round_) * len(self.hypotheses) - i)))
+                # the first round may spend up to 80 % of the budget (the second one
+                # happens only when the baseline was stuck, and takes what is left)
+                cap = (None if budget is None
+                       else budget - spent if round_ else int(0.8 * budget) - spent)
+                share = (None if cap is None
+                         else max(1, cap // (len(self.hypotheses) - i)))
                 f = CurveFitter(hypothesis=h, start=self.baseline_.values_,
                                 max_nfev=self.max_nfev, max_evaluations=share,
                                 n_starts=self.extension_starts, **opts).fit(curve, mask=fit_mask)
