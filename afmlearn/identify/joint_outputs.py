@@ -140,7 +140,7 @@ def format_exponent(summary: dict[str, Any]) -> str:
     iv = summary.get("interaction_exponent_interval")
     if p is None:
         return "interaction exponent: no contact term identified"
-    if iv is None or not all(math.isfinite(v) for v in iv):
+    if iv is None or not all(_finite(v) for v in iv):
         return f"interaction exponent {p:.2f} (no profile interval)"
     txt = f"interaction exponent {p:.2f} (95 % profile interval {iv[0]:.2f}-{iv[1]:.2f})"
     bounded = summary.get("interaction_exponent_bounded")
@@ -152,7 +152,12 @@ def format_exponent(summary: dict[str, Any]) -> str:
     if best is not None and not iv[0] <= p <= iv[1]:
         txt += f"; the profile's best exponent is {best:.2f}, not the selected model's"
     cv = summary.get("interaction_exponent_cv_interval")
-    if cv is not None and all(math.isfinite(v) for v in cv):
+    if cv is not None and all(_finite(v) for v in cv):
         txt += (f"; cross-validated over set-points {cv[0]:.2f}-{cv[1]:.2f}"
                 + ("" if summary.get("interaction_exponent_cv_bounded") else " (NOT bounded)"))
     return txt
+
+
+def _finite(v: Any) -> bool:
+    """A finite number (JSON turns NaN into None: a summary read back has None there)."""
+    return v is not None and math.isfinite(v)

@@ -12,6 +12,7 @@ from scipy.integrate import solve_ivp
 
 from afmlearn.identify._simulate import simulate_period
 from afmlearn.identify.drive import RecordedPhase
+from afmlearn.identify.joint_outputs import format_exponent
 from afmlearn.identify.library import AFMLibrary, Indentation, InversePower, TermInput
 from afmlearn.identify.output_error import (
     OutputErrorFit,
@@ -135,3 +136,14 @@ def test_exponents_of_two_series_differ_by_the_truth(sphere_path: Path,
         assert prof["bounded"] and lo <= truth <= hi, (truth, prof)
     assert 0.25 <= p20 - p15 <= 0.75
     assert prof20["interval"][1] - prof20["interval"][0] < 0.5
+
+
+def test_exponent_line_without_cv_interval() -> None:
+    """The output-error profile has no cross-validated companion (NaN, or None once the
+    summary went through JSON): the line prints the profile interval and its verdict."""
+    for cv in ((math.nan, math.nan), (None, None)):
+        line = format_exponent({"interaction_exponent": 2.5,
+                                "interaction_exponent_interval": (1.0, 3.9),
+                                "interaction_exponent_bounded": False,
+                                "interaction_exponent_cv_interval": cv})
+        assert "1.00-3.90" in line and "NOT bounded" in line and "cross-validated" not in line
