@@ -116,7 +116,7 @@ def _si_parameters(row: dict) -> dict[str, float]:
     base = row.get("baseline_parameters", row["parameters"])
     ext = row["parameters"]
     out = {"free amplitude [nm]": lu * 1e9,
-           "adhesion, baseline [nN]": row.get("adhesion_force_n", np.nan) * 1e9,
+           "adhesion, named model [nN]": row.get("adhesion_force_n", np.nan) * 1e9,
            "held-out gain": row["gain"] if row["cause"] != "none" else np.nan}
     # E delta^1.5 in nN / nm^1.5: stiffness * k L / L^1.5
     out["contact stiffness, baseline [nN/nm^1.5]"] = (base.get("stiffness", np.nan) * k * lu
@@ -134,7 +134,7 @@ def plot_parameter_spread(rows: list[dict], out_dir: Path) -> Path:
     Log-spaced bins for positive quantities spanning more than a decade.
     """
     vals = [(r.get("group", ""), _si_parameters(r)) for r in rows]
-    keys = ["free amplitude [nm]", "adhesion, baseline [nN]",
+    keys = ["free amplitude [nm]", "adhesion, named model [nN]",
             "contact stiffness, baseline [nN/nm^1.5]", "long-range damping [N s/m]",
             "damping decay length [nm]", "held-out gain"]
     groups = sorted({g for g, _ in vals})
