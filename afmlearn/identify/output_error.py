@@ -662,10 +662,13 @@ class OutputErrorProfile:
         level = 3.841 * best.dispersion
         lo, hi, crossed = _crossings(prof, level)
         bounded = bool(crossed and lo > self.low + 1e-9 and hi < self.high - 1e-9)
+        # "n_rows": the count for which n log(score / score_min) ~ (score - score_min) /
+        # dispersion, the equation-error profile's statistic (what the figures draw)
+        n_eq = float(np.nanmin(prof[:, 1])) / best.dispersion
         return ({"profile": prof, "interval": (lo, hi), "bounded": bounded,
                  "best_exponent": float(best.u[4]), "level": level,
                  "dispersion": best.dispersion, "objective": "output_error",
-                 "laws": [r.law.library.names for r in starts]}, best)
+                 "n_rows": n_eq, "laws": [r.law.library.names for r in starts]}, best)
 
 
 def _crossings(prof: FloatArray, level: float) -> tuple[float, float, bool]:
