@@ -328,17 +328,20 @@ def series_section(records: list[dict], variants: list[tuple[int, bool]]) -> str
         if eff:
             first, extra = ["effects: first cause right", str(len(eff))], \
                 ["effects: causes named that are not there", str(len(eff))]
+            later = ["effects: of these, named at a later step", str(len(eff))]
             for v in variants:
-                hit = n_extra = 0
+                hit = n_extra = n_later = 0
                 for k in eff:
                     r = complete[k][v]
                     truth = set(k[0].split("+"))
                     found = [x["cause"] for x in r["causes_found"]]
                     hit += r["cause_found"] in truth
                     n_extra += len(set(found) - truth)
+                    n_later += len(set(found[1:]) - truth - set(found[:1]))
                 first.append(f"{100 * hit / len(eff):.0f} %")
                 extra.append(f"{n_extra}")
-            rows += [first, extra]
+                later.append(f"{n_later}")
+            rows += [first, extra, later]
         errors = [f"{k[0]} ({vname[v]}): {complete[k][v]['error']}" for k in complete
                   for v in variants if "error" in complete[k][v]]
         for v in variants:
