@@ -270,7 +270,8 @@ def section(recs: list[dict], args, oracles: dict | None = None) -> str:
                  f"{sum(e['repulsive_end'] for e in ex)}" if ex else "")
         obs = [oracles.get((r["cause"], r["index"])) for r in rs]
         obs = [(o["evidence"] is not None and o["evidence"] > 10.0, r["named"] == cause)
-               for o, r in zip(obs, rs, strict=True) if o is not None]
+               for o, r in zip(obs, rs, strict=True)
+               if o is not None and o["evidence"] is not None]
         seen += obs
         n_obs = sum(v for v, _ in obs)
         observable = (f"{n_obs}/{len(obs)}; {sum(v and ok for v, ok in obs)}/{n_obs}"
