@@ -604,7 +604,9 @@ class Diagnoser:
         else:   # joint fits cost n_obs orbits per evaluation: one start, fewer iterations
             starts = fit_extension(jb, current.hb, h, ctx, n_starts=min(h.n_starts, 2),
                                    max_nfev=60)
-            if current.hb.chi2 - starts[0].chi2 < self.screen_chi2:
+            if len(h.a0_grid) > 1:      # starts at several onsets: ranked by output error
+                starts.sort(key=lambda s: float(np.sum(oe.residual(s.spec, s.coef)[0] ** 2)))
+            if current.hb.chi2 - min(s.chi2 for s in starts) < self.screen_chi2:
                 # no equation-error evidence at all: the output error is not run (measured on
                 # series: the equation-error drop is at least the output-error drop except
                 # for a second mode, where it is far larger)

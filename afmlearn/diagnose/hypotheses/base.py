@@ -99,6 +99,10 @@ class AbstractHypothesis(abc.ABC):
     #: how far ``a0`` may move from the model this extends (factor, > 1): a sphere baseline
     #: compensates a cone by a far-off ``a0`` (measured: base 0.0089 L_ref, true 0.0277)
     a0_factor: ClassVar[float] = 3.0
+    #: factors of the current ``a0`` at which the extension's grid is also searched (several:
+    #: joint fits add one start per factor with ``a0`` held there and rank the starts by output
+    #: error; the sphere baseline absorbs a 4 V bias with ``a0`` 8x too large)
+    a0_grid: ClassVar[tuple[float, ...]] = (1.0,)
 
     @abc.abstractmethod
     def parameters(self, ctx: Context) -> list[Parameter]:
