@@ -88,6 +88,25 @@ def test_cone_series_is_named_with_an_exponent_above_the_sphere(series):
     assert dg.exponent_bounded_ and 1.5 < lo <= dg.exponent_ <= hi
 
 
+def test_neck_series_is_named(series):
+    """A JKR neck (rate-independent loss at pull-off) is named by the neck extension (drop
+    at the true neck 36, threshold 9.9), which the sample takes energy from."""
+    dg = _diagnose(series("adhesion_hysteresis"), [AdhesionHysteresis()])
+    assert dg.cause_ == "adhesion_hysteresis", dg.candidates_
+    assert dg.gain_ > 0.05
+    assert dg.extended_.spec.neck_length is not None
+
+
+def test_electrostatic_series_is_named(series):
+    """A 4 V bias is named although the sphere baseline absorbs part of it with a far-off
+    a0 (drop at the true law 85, threshold 9.9)."""
+    dg = _diagnose(series("electrostatic"), [Electrostatic()])
+    assert dg.cause_ == "electrostatic", dg.candidates_
+    assert dg.gain_ > 0.05
+    r_nm = dg.extended_.spec.electrostatic_radius * dg.extended_.scales.length * 1e9
+    assert 1.0 <= r_nm <= 100.0
+
+
 def test_null_twin_is_named_by_none_of_them(series):
     """The cone case without its effect (a sphere): none of the three causes."""
     dg = _diagnose(series("none"), [ContactGeometry(), AdhesionHysteresis(), Electrostatic()])
