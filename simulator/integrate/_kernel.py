@@ -43,7 +43,9 @@ costs some 60--80 extra steps per contact and removes most of the error constant
 Speed (``docs/benchmarks.md``, "Integrator throughput"): the step loop is kept small -- the
 force law and the RK4 stages are inlined, the rare switch location (:func:`_switch`) and the
 crossing solve past its quick reject (:func:`_crossing_solve`) are out of line. Inlining more
-(the whole RK4 step into the loop) or less (the force law) measured 1.5--2x slower steps.
+(the whole RK4 step into the loop) or less (the force law) measured 1.5--2x slower steps. The
+per-step call :func:`_rk4` takes at most 30 arguments: CPython passes a call with more as
+``*args`` and numba then builds a tuple of all of them at every call (~20 % of a step).
 
 Work integrals (``W``): 0 drive input ``int sum_i drive_i v_i``, 1 cantilever damping
 ``int sum_i D_i v_i**2``, 2 work done on the tip--sample force ``int F sum_i s_i v_i``,
@@ -113,14 +115,21 @@ def _gap(q, v, M, tau, c, s, yb, om, g0, gr):
 
 
 @njit(cache=True, _nrt=False)
-def _rk4(q, v, W, M, tau, h, cm, sm, c1, s1, r, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr,
-         kinds, p1, p2, cf, a0, geometric, a1, pa, qn, vn, Wn, wk, pk):
+def _rk4(q, v, W, M, tau, h, cm, sm, c1, s1, r, mp, yb, om, g0, gr, kinds, p1, p2, cf, a0,
+         geometric, a1, pa, qn, vn, Wn, wk, pk):
     """One classical RK4 step of length ``h`` for ``q' = v, v' = a(q, v, tau)``.
 
     ``(a1, pa)`` is the first stage at ``(q, v, tau)``; drive cos/sin at the midpoint and the
     end are passed in. The new state goes to ``(qn, vn, Wn)``. ``wk`` (8, M) and ``pk``
-    (3, N_WORK) are scratch buffers.
+    (3, N_WORK) are scratch buffers. ``mp`` (6, M) holds the modal ``K, Dair, Dcon, S, dc,
+    ds``: packed so that a call has at most 30 arguments (module docstring).
     """
+    K = mp[0]
+    Dair = mp[1]
+    Dcon = mp[2]
+    S = mp[3]
+    dc = mp[4]
+    ds = mp[5]
     h2 = 0.5 * h
     qs = wk[0]
     v2 = wk[1]
@@ -226,9 +235,8 @@ def _crossing_solve(e0, e1, d0, d1, sgn):
 
 
 @njit(cache=True, _nrt=False)
-def _graded_to_end(q, v, W, M, tau, length, hmin, r, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr,
-                   th0, kinds, p1, p2, cf, a0, geometric, a1, pa, qe, ve, We, qg, vg, Wg, ag,
-                   pg, wk, pk):
+def _graded_to_end(q, v, W, M, tau, length, hmin, r, mp, yb, om, g0, gr, th0, kinds, p1, p2,
+                   cf, a0, geometric, a1, pa, qe, ve, We, qg, vg, Wg, ag, pg, wk, pk):
     """Integrate from (q, v, W) at ``tau`` over ``length`` with steps shrinking geometrically
     towards the end (a singular point of the force); result in (qe, ve, We).
 
@@ -252,9 +260,8 @@ def _graded_to_end(q, v, W, M, tau, length, hmin, r, K, Dair, Dcon, S, dc, ds, y
         th1 = th0 + om * (tau + t + step)
         c1 = math.cos(th1)
         s1 = math.sin(th1)
-        _rk4(qg, vg, Wg, M, tau + t, step, math.cos(thm), math.sin(thm), c1, s1, r, K, Dair,
-             Dcon, S, dc, ds, yb, om, g0, gr, kinds, p1, p2, cf, a0, geometric, ag, pg, qe, ve,
-             We, wk, pk)
+        _rk4(qg, vg, Wg, M, tau + t, step, math.cos(thm), math.sin(thm), c1, s1, r, mp, yb, om,
+             g0, gr, kinds, p1, p2, cf, a0, geometric, ag, pg, qe, ve, We, wk, pk)
         t += step
         if step == d:
             return
@@ -263,14 +270,13 @@ def _graded_to_end(q, v, W, M, tau, length, hmin, r, K, Dair, Dcon, S, dc, ds, y
             vg[i] = ve[i]
         for j in range(N_WORK):
             Wg[j] = We[j]
-        _rhs(qg, vg, M, tau + t, c1, s1, r, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr, kinds, p1,
-             p2, cf, a0, geometric, ag, pg)
+        _rhs(qg, vg, M, tau + t, c1, s1, r, mp[0], mp[1], mp[2], mp[3], mp[4], mp[5], yb, om, g0,
+             gr, kinds, p1, p2, cf, a0, geometric, ag, pg)
 
 
 @njit(cache=True, _nrt=False)
-def _switch(q, v, W, M, tau, hs, hh, zsw, hmin, r, r_new, K, Dair, Dcon, S, dc, ds, yb, om, g0,
-            gr, th0, kinds, p1, p2, cf, a0, geometric, grade, a1, pa, qe, ve, We, qg, vg, Wg, ag,
-            pg, wk, pk):
+def _switch(q, v, W, M, tau, hs, hh, zsw, hmin, r, r_new, mp, yb, om, g0, gr, th0, kinds, p1,
+            p2, cf, a0, geometric, grade, a1, pa, qe, ve, We, qg, vg, Wg, ag, pg, wk, pk):
     """Step from ``tau`` onto the switch ``z = zsw`` found at ``tau + hs`` (``hs < hh``) and
     enter regime ``r_new``: Newton on the RK4 sub-step, the state (q, v, W) and the first stage
     (a1, pa) updated in place; returns ``(tau, cos, sin, z, z', F)`` after the switch.
@@ -283,14 +289,12 @@ def _switch(q, v, W, M, tau, hs, hh, zsw, hmin, r, r_new, K, Dair, Dcon, S, dc, 
         s1e = math.sin(th1)
         if grade and r == CONTACT:
             # leaving contact: the force is singular at the switch
-            _graded_to_end(q, v, W, M, tau, hs, hmin, r, K, Dair, Dcon, S, dc, ds, yb, om, g0,
-                           gr, th0, kinds, p1, p2, cf, a0, geometric, a1, pa, qe, ve, We, qg,
-                           vg, Wg, ag, pg, wk, pk)
+            _graded_to_end(q, v, W, M, tau, hs, hmin, r, mp, yb, om, g0, gr, th0, kinds, p1, p2,
+                           cf, a0, geometric, a1, pa, qe, ve, We, qg, vg, Wg, ag, pg, wk, pk)
         else:
             thm = th0 + om * (tau + 0.5 * hs)
-            _rk4(q, v, W, M, tau, hs, math.cos(thm), math.sin(thm), c1e, s1e, r, K, Dair, Dcon,
-                 S, dc, ds, yb, om, g0, gr, kinds, p1, p2, cf, a0, geometric, a1, pa, qe, ve, We,
-                 wk, pk)
+            _rk4(q, v, W, M, tau, hs, math.cos(thm), math.sin(thm), c1e, s1e, r, mp, yb, om, g0,
+                 gr, kinds, p1, p2, cf, a0, geometric, a1, pa, qe, ve, We, wk, pk)
         ze, zde = _gap(qe, ve, M, tau + hs, c1e, s1e, yb, om, g0, gr)
         err = ze - zsw
         if abs(err) < 1e-14 or zde == 0.0:
@@ -305,8 +309,8 @@ def _switch(q, v, W, M, tau, hs, hh, zsw, hmin, r, r_new, K, Dair, Dcon, S, dc, 
     for j in range(N_WORK):
         W[j] = We[j]
     tau = tau + hs
-    z, zd, f = _rhs(q, v, M, tau, c1e, s1e, r_new, K, Dair, Dcon, S, dc, ds, yb, om, g0, gr,
-                    kinds, p1, p2, cf, a0, geometric, a1, pa)
+    z, zd, f = _rhs(q, v, M, tau, c1e, s1e, r_new, mp[0], mp[1], mp[2], mp[3], mp[4], mp[5], yb,
+                    om, g0, gr, kinds, p1, p2, cf, a0, geometric, a1, pa)
     return tau, c1e, s1e, z, zd, f
 
 
@@ -383,6 +387,14 @@ def integrate_one(q, v, W, r, th0, om, dc, ds, yb, g0, gr, K, Dair, Dcon, S, kin
     pg = np.empty(N_WORK)
     Wn = np.empty(N_WORK)
     We = np.empty(N_WORK)
+    mp = np.empty((6, M))  # modal parameters, one argument for _rk4 (see there)
+    for i in range(M):
+        mp[0, i] = K[i]
+        mp[1, i] = Dair[i]
+        mp[2, i] = Dcon[i]
+        mp[3, i] = S[i]
+        mp[4, i] = dc[i]
+        mp[5, i] = ds[i]
     hmin = GRADE_MIN * h
     grade_span = h / GRADE_RATIO if grade else -1.0
     tau_ev = -1e300  # time of the last entry into contact
@@ -439,8 +451,8 @@ def integrate_one(q, v, W, r, th0, om, dc, ds, yb, g0, gr, K, Dair, Dcon, S, kin
                     sm = math.sin(thm)
                     c1 = math.cos(th1)
                     s1 = math.sin(th1)
-                _rk4(q, v, W, M, tau, hh, cm, sm, c1, s1, r, K, Dair, Dcon, S, dc, ds, yb, om,
-                     g0, gr, kinds, p1, p2, cf, a0, geometric, a1, pa, qn, vn, Wn, wk, pk)
+                _rk4(q, v, W, M, tau, hh, cm, sm, c1, s1, r, mp, yb, om, g0, gr, kinds, p1, p2, cf,
+                     a0, geometric, a1, pa, qn, vn, Wn, wk, pk)
                 z1, zd1, f1 = _rhs(qn, vn, M, tau + hh, c1, s1, r, K, Dair, Dcon, S, dc, ds, yb,
                                    om, g0, gr, kinds, p1, p2, cf, a0, geometric, an, pn)
                 fresh = False
@@ -479,9 +491,9 @@ def integrate_one(q, v, W, r, th0, om, dc, ds, yb, g0, gr, K, Dair, Dcon, S, kin
                 # ---- event: locate it on the RK4 map, switch regime, continue
                 n_ev += 1
                 tau, c, s, z, zd, f = _switch(
-                    q, v, W, M, tau, t_ev * hh, hh, zsw, hmin, r, r_new, K, Dair, Dcon, S, dc,
-                    ds, yb, om, g0, gr, th0, kinds, p1, p2, cf, a0, geometric, grade, a1, pa, qe,
-                    ve, We, qg, vg, Wg, ag, pg, wk, pk)
+                    q, v, W, M, tau, t_ev * hh, hh, zsw, hmin, r, r_new, mp, yb, om, g0, gr, th0,
+                    kinds, p1, p2, cf, a0, geometric, grade, a1, pa, qe, ve, We, qg, vg, Wg, ag,
+                    pg, wk, pk)
                 r = r_new
                 if r == CONTACT:
                     tau_ev = tau
