@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import math
 import sys
 import time
@@ -63,6 +64,8 @@ from .joint import JointBalance
 from .model import DiagnosisModel
 from .observation import Observation, as_traces, build_observations, folds
 from .output_error import OutputError
+
+logger = logging.getLogger(__name__)
 
 __all__ = ["Diagnoser", "NullCalibration", "Candidate", "Step", "HeldOut",
            "ObservationResult", "name_cause"]
@@ -390,7 +393,7 @@ class Diagnoser:
 
     def _log(self, msg: str) -> None:
         if self.progress:
-            print(f"[diagnose {time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
+            logger.info("%s", msg)
 
     # ------------------------------------------------------------------ fit
     def fit(self, data: Any, *, row: int | None = None) -> Diagnoser:

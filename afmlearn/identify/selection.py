@@ -19,8 +19,8 @@ criteria lean to richer models: use them as a second opinion beside the knee.
 
 from __future__ import annotations
 
+import logging
 import math
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal, final
@@ -30,6 +30,8 @@ from numpy.typing import ArrayLike, NDArray
 from sklearn.base import clone
 
 from afmlearn.identify.optimizers.sr3 import BoxSR3
+
+logger = logging.getLogger(__name__)
 
 __all__ = [
     "Candidate",
@@ -380,7 +382,7 @@ class GridSearch:
                 rng = np.where(yr[val] > 0, yr[val], 1.0)
                 fold_err[:, v, f] = np.mean(rmse / rng[None], axis=1)
             if self.progress:
-                print(f"GridSearch: fold {f + 1}/{self.n_folds + 1} done", file=sys.stderr)
+                logger.info("GridSearch: fold %d/%d done", f + 1, self.n_folds + 1)
         G_all, b_all, yy_all = Gc[-1], bc[-1], yyb.sum(axis=0)
         cands = []
         for k, t in enumerate(ts):
