@@ -17,6 +17,8 @@ from typing import final
 import numpy as np
 from numpy.typing import NDArray
 
+from afmlearn.preprocess.phase import wrap_angle
+
 from .balance import HarmonicBalance, Solution, bounded_lstsq
 from .spec import ModelSpec
 
@@ -28,10 +30,7 @@ FloatArray = NDArray[np.float64]
 PhasePrior = tuple[float, float]
 
 
-def wrap(a: float | FloatArray) -> float | FloatArray:
-    """Angle(s) wrapped to ``(-pi, pi]``."""
-    return np.pi - np.mod(np.pi - np.asarray(a, float), 2 * np.pi) if np.ndim(a) else \
-        float(math.pi - (math.pi - float(a)) % (2 * math.pi))
+wrap = wrap_angle  # angle(s) wrapped to (-pi, pi]: the one helper in afmlearn.preprocess
 
 
 @final

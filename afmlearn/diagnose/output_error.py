@@ -26,12 +26,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
+from afmlearn.preprocess.phase import align_phase
 from simulator import Scales
 
 from ._kernel import simulate_model
 from .balance import Solution, harmonics, to_real
 from .hypotheses.base import Parameter
-from .joint import JointBalance, PhasePrior, wrap
+from .joint import JointBalance
 from .model import DiagnosisModel
 from .spec import ModelSpec, neck_state
 
@@ -142,42 +143,6 @@ def _monodromy(period_map, x: FloatArray, px: FloatArray, scale: float) -> Float
         xp[j] += h
         J[:, j] = (period_map(xp)[0] - px) / h
     return J
-
-
-def align_phase(X0: NDArray[np.complex128], Y: NDArray[np.complex128], sigma: float,
-                prior: PhasePrior | None = None) -> float:
-    """Drive phase ``phi`` minimising ``sum_n |X0_n e^{-i n phi} - Y_n|^2 / sigma^2`` (n >= 1)
-    plus the prior ``((phi - mean) / sd)^2``.
-
-    ``X0`` are the harmonics of the phase-0 orbit, ``Y`` the measured ones (same length),
-    ``sigma`` the noise of one real harmonic coefficient. Grid of 1024 phases (one FFT), then
-    Newton steps.
-    """
-    n = np.arange(1, min(X0.size, Y.size))
-    a = np.conj(Y[n]) * X0[n]
-    m = max(256, 2 * n.size + 2)
-    full = np.zeros(m, complex)
-    full[n] = a
-    g = np.real(np.fft.fft(full))             # g_k = Re sum_n a_n e^{-i n 2 pi k / m}
-    phis = 2 * np.pi * np.arange(m) / m
-    f = -2.0 * g / sigma**2
-    if prior is not None:
-        f = f + (wrap(phis - prior[0]) / prior[1]) ** 2
-    phi = float(phis[int(np.argmin(f))])
-    for _ in range(6):
-        e = a * np.exp(-1j * n * phi)
-        d1 = -2.0 * float(np.real(np.sum(-1j * n * e))) / sigma**2
-        d2 = -2.0 * float(np.real(np.sum(-(n**2) * e))) / sigma**2
-        if prior is not None:
-            d1 += 2.0 * wrap(phi - prior[0]) / prior[1] ** 2
-            d2 += 2.0 / prior[1] ** 2
-        if d2 <= 0:
-            break
-        step = max(min(d1 / d2, 0.05), -0.05)
-        phi -= step
-        if abs(step) < 1e-12:
-            break
-    return float(wrap(phi))
 
 
 def settle_periods(model: DiagnosisModel, *, cap: int = 3000) -> int:

@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from afmlearn.preprocess import fit_harmonics
+from afmlearn.preprocess.phase import align_phase, wrap_angle
 
 from ._simulate import simulate_period
 from .library import AFMLibrary, Indentation, TermInput
@@ -181,47 +182,6 @@ def _shoot(pmap: Any, s: FloatArray, J: FloatArray | None, max_iter: int, tol: f
     ok = bool(np.all(np.isfinite(ps))) and float(np.max(np.abs(ps - s))) < 1e-6 * max(
         float(np.max(np.abs(s))), 1e-3)
     return xs, s, J, ok
-
-
-def align_phase(X0: ComplexArray, Y: ComplexArray, sigma: FloatArray,
-                prior: tuple[float, float] | None = None) -> float:
-    """Drive phase ``phi`` minimising ``sum_k |X0_k e^{-i k phi} - Y_k|^2 / sigma_k^2``
-    (``k >= 1``) plus ``((phi - mean) / sd)^2`` for a ``prior`` ``(mean, sd)``.
-
-    A grid of ``max(256, 4 n)`` phases (one FFT) and then Newton steps; returns ``phi`` in
-    ``(-pi, pi]``.
-    """
-    k = np.arange(1, min(X0.size, Y.size))
-    w = 1.0 / sigma[k] ** 2
-    a = w * np.conj(Y[k]) * X0[k]            # cost = const - 2 Re sum a_k e^{-i k phi}
-    m = max(256, 4 * k.size)
-    full = np.zeros(m, complex)
-    full[k] = a
-    g = np.real(np.fft.fft(full))
-    phis = 2 * np.pi * np.arange(m) / m
-    f = -2.0 * g
-    if prior is not None:
-        f = f + (_wrap(phis - prior[0]) / prior[1]) ** 2
-    phi = float(phis[int(np.argmin(f))])
-    for _ in range(8):
-        e = a * np.exp(-1j * k * phi)
-        d1 = -2.0 * float(np.real(np.sum(-1j * k * e)))
-        d2 = -2.0 * float(np.real(np.sum(-(k**2) * e)))
-        if prior is not None:
-            d1 += 2.0 * _wrap(phi - prior[0]) / prior[1] ** 2
-            d2 += 2.0 / prior[1] ** 2
-        if d2 <= 0:
-            break
-        step = max(min(d1 / d2, 0.05), -0.05)
-        phi -= step
-        if abs(step) < 1e-13:
-            break
-    return float(_wrap(phi))
-
-
-def _wrap(a: Any) -> Any:
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi if np.ndim(a) else \
-        (float(a) + math.pi) % (2 * math.pi) - math.pi
 
 
 # ---------------------------------------------------------------------------- the law
@@ -401,7 +361,7 @@ class _Objective:
             r = np.concatenate([[d[0].real], d[1:].real, d[1:].imag])
             res.append(np.where(np.isfinite(r), r, 0.0))
             if prior is not None:
-                res.append(np.array([_wrap(phi - rot) / w]))
+                res.append(np.array([wrap_angle(phi - rot) / w]))
         self.ok = ok
         res.append(np.asarray(self.priors(u), float))
         return np.concatenate(res)

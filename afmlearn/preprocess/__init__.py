@@ -8,6 +8,8 @@ Public API
     The dimensionless view of one trace row, with the drive amplitude ``F_c`` from free data.
 `fit_harmonics`, `HarmonicFit`, `phase_average`
     Least-squares Fourier series in the drive phase over all samples; analytic derivatives.
+`afmlearn.preprocess.phase`: `align_phase`, `wrap_angle`
+    The drive phase of a steady orbit in closed form from its harmonics (output-error fits).
 `savgol_derivatives`, `spectral_derivatives`, `SavitzkyGolay`, `Spectral`,
 `HarmonicDerivatives`, `AbstractDerivatives`, `default_window`
     Derivative estimators (functions and strategy objects).
