@@ -141,18 +141,15 @@ def evaluate(module: Any, dataloader: Iterable[dict[str, torch.Tensor]], *,
             e, threshold=vpt_threshold)))
     metrics["window_coupling_auc"] = roc_auc(d["coupled"] > 0.5, d["coupled_score"])
     # per trace = per (sweep, point)
+    t = trace_table(d)
+    score, coupled = t["raw_score"], t["coupled"]
+    sweet_score = t["sweet_score"]
     key = d["sweep_id"].astype(np.int64) * 1_000_003 + d["point"].astype(np.int64)
-    ids, score = trace_scores(d["coupled_score"], key)
-    _, label = trace_scores(d["coupled"].astype(float), key)
-    _, sweet_score = trace_scores(d["sweet_score"], key)
-    _, sweet_label = trace_scores(d["sweet"].astype(float), key)
-    first = np.unique(key, return_index=True)[1]
-    omega = d["omega"][first].astype(float)
-    sweep = d["sweep_id"][first]
-    point = d["point"][first]
-    metrics["coupling_auc"] = roc_auc(label > 0.5, score)
-    metrics["coupling_accuracy"] = float(np.mean((score >= threshold) == (label > 0.5)))
-    metrics["n_traces"] = float(ids.size)
+    _, sweet_label = trace_scores(d["sweet"].astype(float), key)  # the share, as labelled
+    omega, sweep, point = t["omega"], t["sweep_id"], t["point"]
+    metrics["coupling_auc"] = roc_auc(coupled, score)
+    metrics["coupling_accuracy"] = float(np.mean((score >= threshold) == coupled))
+    metrics["n_traces"] = float(score.size)
     metrics["n_windows"] = float(key.size)
     ious, ious_labelled = [], []
     for s in np.unique(sweep):
