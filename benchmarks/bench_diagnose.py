@@ -29,6 +29,8 @@ import hashlib  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import multiprocessing as mp  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -37,6 +39,10 @@ import numpy as np  # noqa: E402
 from _common import ROOT, add_doc_flag, fmt, machine_info, md_table, write_section  # noqa: E402
 from scipy import stats  # noqa: E402
 from tqdm.auto import tqdm  # noqa: E402
+
+#: a code snapshot (``--snapshot``) goes before the working tree, which _common put first
+if os.environ.get("BENCH_DIAGNOSE_CODE"):
+    sys.path.insert(0, os.environ["BENCH_DIAGNOSE_CODE"])
 
 from afmlearn.diagnose import CAUSES, Diagnoser, NullCalibration  # noqa: E402
 from afmlearn.diagnose.diagnoser import name_cause  # noqa: E402
@@ -76,10 +82,11 @@ def _key(r: dict) -> tuple:
 
 
 def run_jobs(jobs: list[dict], records: Path, workers: int, *, job=None, key=None,
-             desc: str = "diagnose") -> list[dict]:
+             desc: str = "diagnose", accept=None) -> list[dict]:
     """Run the missing ``jobs`` (resumable: one JSON line each as it finishes, in ``records``)
     and return the record of every job that has one. ``job``/``key``: the worker function
-    and the record key (default: one-record diagnoses)."""
+    and the record key (default: one-record diagnoses); ``accept``: which stored records
+    count as done (default all; a later line of the same key replaces an earlier one)."""
     job, key = job or _job, key or _key
     records.parent.mkdir(parents=True, exist_ok=True)
     done = {}
@@ -87,7 +94,8 @@ def run_jobs(jobs: list[dict], records: Path, workers: int, *, job=None, key=Non
         for line in records.read_text().splitlines():
             if line.strip():
                 r = json.loads(line)
-                done[key(r)] = r
+                if accept is None or accept(r):
+                    done[key(r)] = r
     todo = [j for j in jobs if key(j) not in done]
     if todo:
         ctx = mp.get_context("spawn")
@@ -213,6 +221,31 @@ def _cause_code(cause: str) -> int:
     return int(hashlib.sha1(cause.encode()).hexdigest()[:6], 16)
 
 
+def code_version() -> str:
+    """The commit of the ``afmlearn`` code this process imported.
+
+    A snapshot made by ``--snapshot`` (``git archive`` of one commit, put first on
+    ``PYTHONPATH``) carries a ``COMMIT`` file: its id, so records taken in a tree that other
+    people edit still name the code they measured. Otherwise ``git rev-parse HEAD`` of the
+    tree, with ``+dirty`` when ``afmlearn/`` or ``simulator/`` have uncommitted changes.
+    """
+    import afmlearn
+
+    pkg_root = Path(afmlearn.__file__).resolve().parents[1]
+    stamp = pkg_root / "COMMIT"
+    if stamp.exists():
+        return stamp.read_text().strip()
+    try:
+        head = subprocess.run(["git", "-C", str(pkg_root), "rev-parse", "--short=10", "HEAD"],
+                              capture_output=True, text=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(pkg_root), "status", "--porcelain",
+                                "afmlearn", "simulator"], capture_output=True, text=True,
+                               timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return (head or "unknown") + ("+dirty" if dirty else "")
+
+
 def _series_job(job: dict) -> dict:
     """Diagnose one variant (set-points, drive phase recorded or not) of one series draw."""
     folder = Path(job["files"])
@@ -230,12 +263,14 @@ def _series_job(job: dict) -> dict:
         d = Diagnoser().fit(exp if len(exp) > 1 else exp[0])
     except Exception as err:  # noqa: BLE001 -- a failed diagnosis is a result to report
         return {**job, "case": case, "t_sim": t_sim, "t_diag": time.perf_counter() - t1,
+                "commit": code_version(), "load": os.getloadavg()[0],
                 "error": f"{type(err).__name__}: {err}", "cause_found": "error", "gain": 0.0,
                 "causes_found": [], "exponent": None, "exponent_interval": None,
                 "candidates": []}
     t_diag = time.perf_counter() - t1
     ivl = getattr(d, "exponent_interval_", None)
-    return {**job, "case": case, "t_sim": t_sim, "t_diag": t_diag,
+    return {**job, "case": case, "t_sim": t_sim, "t_diag": t_diag, "commit": code_version(),
+            "load": os.getloadavg()[0],
             "baseline_nrmse": d.baseline_nrmse_, "extended_nrmse": d.extended_nrmse_,
             "cause_found": d.cause_, "gain": d.gain_,
             "causes_found": [{"cause": c.cause, "gain": float(c.gain)}
@@ -250,10 +285,41 @@ def _series_key(r: dict) -> tuple:
     return (*_key(r), r["n_points"], r["phase"])
 
 
-def run_series_jobs(jobs: list[dict], records: Path, workers: int) -> list[dict]:
-    """Run missing variant jobs (resumable, one JSON line each as it finishes)."""
+def run_series_jobs(jobs: list[dict], records: Path, workers: int,
+                    since: str = "") -> list[dict]:
+    """Run missing variant jobs (resumable, one JSON line each as it finishes); with
+    ``since`` a stored record counts only when taken on that commit or a later one."""
     return run_jobs(jobs, records, workers, job=_series_job, key=_series_key,
-                    desc="diagnose series")
+                    desc="diagnose series", accept=_since(since) if since else None)
+
+
+def _since(commit: str):
+    """Record filter: taken on ``commit`` or a descendant (never on a dirty tree)."""
+    cache: dict[str, bool] = {}
+
+    def ok(r: dict) -> bool:
+        c = r.get("commit", "unknown")
+        if c not in cache:
+            cache[c] = ("+" not in c and c != "unknown" and subprocess.run(
+                ["git", "-C", str(ROOT), "merge-base", "--is-ancestor", commit, c],
+                capture_output=True, timeout=10).returncode == 0)
+        return cache[c]
+    return ok
+
+
+def make_snapshot(commit: str, root: Path) -> Path:
+    """``git archive`` of ``afmlearn/`` and ``simulator/`` at ``commit`` into
+    ``root/<id>`` (made once), with a ``COMMIT`` file naming it; returns the folder."""
+    full = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short=10", commit],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    dest = root / full
+    if not (dest / "COMMIT").exists():
+        dest.mkdir(parents=True, exist_ok=True)
+        arch = subprocess.run(["git", "-C", str(ROOT), "archive", full, "afmlearn",
+                               "simulator"], capture_output=True, check=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(dest)], input=arch, check=True)
+        (dest / "COMMIT").write_text(full + "\n")
+    return dest
 
 
 def series_jobs(settings: list[tuple[int, float]], per_cause: int, pairs: int, periods: float,
@@ -424,6 +490,15 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
     variants = [(int(n), ph == "phase") for n, ph in
                 (v.split(":") for v in args.variants.split(","))]
     rec_dir = Path(args.records)
+    if args.snapshot and not os.environ.get("BENCH_DIAGNOSE_CODE"):
+        # run on a clean copy of one commit (the shared tree may hold others' edits)
+        snap = make_snapshot(args.snapshot, rec_dir / "code")
+        argv = [a for a in sys.argv if not a.startswith("--snapshot")]
+        if "--snapshot" in sys.argv:
+            i = sys.argv.index("--snapshot")
+            argv = sys.argv[:i] + sys.argv[i + 2:]
+        env = {**os.environ, "BENCH_DIAGNOSE_CODE": str(snap)}
+        os.execve(sys.executable, [sys.executable, *argv], env)
     if args.calibrate:
         return series_calibrate(args, settings, rec_dir)
     jobs = series_jobs(settings, args.per_cause, args.pairs, args.periods, args.seed,
@@ -436,10 +511,11 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
             for line in path.read_text().splitlines():
                 if line.strip():
                     r = json.loads(line)
-                    have[_series_key(r)] = r
+                    if not args.since or _since(args.since)(r):
+                        have[_series_key(r)] = r
         recs = [have[_series_key(j)] for j in jobs if _series_key(j) in have]
     else:
-        recs = run_series_jobs(jobs, rec_dir / "series.jsonl", args.workers)
+        recs = run_series_jobs(jobs, rec_dir / "series.jsonl", args.workers, since=args.since)
     body = series_section(recs, variants)
     if args.note:
         body += "\n\n" + args.note
@@ -475,6 +551,12 @@ def main(argv: list[str] | None = None) -> int:
                     help="series: comma-separated single causes to draw (default: all)")
     ap.add_argument("--variants", default="1:phase,4:phase,8:phase,1:none,4:none,8:none",
                     help="series: comma-separated n_points:phase|none")
+    ap.add_argument("--since", default="",
+                    help="series: stored records count as done only if taken on this commit "
+                         "or a later one (re-run what a change affects)")
+    ap.add_argument("--snapshot", default="",
+                    help="series: run on a git-archive copy of this commit (e.g. HEAD) "
+                         "instead of the working tree; records name the commit")
     add_doc_flag(ap)
     args = ap.parse_args(argv)
     info = machine_info()
