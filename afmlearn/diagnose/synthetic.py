@@ -48,7 +48,7 @@ from simulator.sensor import DetectorNonlinearity, GaussianNoise
 
 __all__ = ["CAUSES", "EFFECT_CAUSES", "EFFECT_PAIRS", "Case", "SeriesCase", "draw_case",
            "simulate_case", "hidden_trace", "draw_series_case", "simulate_series",
-           "hidden_series"]
+           "hidden_series", "effect_visibility"]
 
 #: the cause vocabulary of design.md section 3 (``none`` first)
 CAUSES: tuple[str, ...] = ("none", "higher_mode", "viscoelastic", "long_range_damping",
@@ -388,6 +388,18 @@ class SeriesCase:
         """Rest gap of each row [m], shape (n_points,)."""
         return np.asarray(self.setpoints) * self.free_amplitude_m
 
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> SeriesCase:
+        """Inverse of :meth:`to_dict` (the ``cause`` label is derived, so ignored)."""
+        return cls(causes=tuple(d["causes"]), quality_factor=float(d["quality_factor"]),
+                   free_amplitude_m=float(d["free_amplitude_m"]),
+                   setpoints=tuple(float(v) for v in d["setpoints"]),
+                   settle_offsets=tuple(float(v) for v in d["settle_offsets"]),
+                   tip_radius_m=float(d["tip_radius_m"]), hamaker_j=float(d["hamaker_j"]),
+                   reduced_modulus_pa=float(d["reduced_modulus_pa"]), a0_m=float(d["a0_m"]),
+                   effects={k: dict(v) for k, v in d["effects"].items()},
+                   seed=int(d["seed"]))
+
     def to_dict(self) -> dict[str, Any]:
         return {"cause": self.cause, "causes": list(self.causes),
                 "quality_factor": self.quality_factor,
@@ -653,3 +665,74 @@ def hidden_series(rng: np.random.Generator, path: str | os.PathLike[str], *,
             continue
         return case
     raise RuntimeError(f"no tapping series in {max_draws} draws (causes {causes!r})")
+
+
+def effect_visibility(case: SeriesCase, *, samples_per_period: int = 200,
+                      n_periods: float = 40.0, noise_level: float = 0.01,
+                      n_harmonics: int = 30) -> dict[str, dict[str, Any]]:
+    """How far each hidden effect moves the recorded orbits, in noise units (an oracle).
+
+    For every cause of ``case`` the series is simulated without noise twice: as drawn, and
+    as its *twin* with that one effect switched off (same lever, sample, set-points, drive
+    phases). Per row, the period-averaged harmonics 0 - ``n_harmonics`` of the two records
+    are compared in units of their standard error under the recording's white noise
+    (``noise_level`` x free amplitude per sample): ``chi2 = sum_k |c_k - c_k'|^2 / (2
+    sigma^2 / n)`` (``sigma^2 / n`` for the mean), ``n`` samples per row.
+
+    This is the chi-square drop that the *true* law would give over the twin's law at the
+    drawn parameters. The effect-free model refits its parameters, so a diagnosis can only
+    see less: a draw whose ``chi2_total`` is below a cause's threshold is invisible, a larger
+    value is necessary for a finding, not sufficient. For the benchmark and tests only: it
+    reads the truth, so it is never passed to the code under test.
+
+    Parameters
+    ----------
+    case : SeriesCase
+        The drawn truth.
+    samples_per_period, n_periods, noise_level
+        As the recording (see :func:`simulate_series`).
+    n_harmonics : int
+        Highest harmonic compared, >= 1 (below the Nyquist limit).
+
+    Returns
+    -------
+    dict
+        Per cause: ``chi2_rows`` (list, per row), ``chi2_total`` (float), ``same_branch``
+        (bool: every row in the same regime with and without the effect).
+    """
+    if not 1 <= n_harmonics < samples_per_period // 2:
+        raise ValueError(f"n_harmonics must be in [1, samples_per_period // 2), got "
+                         f"{n_harmonics}")
+    if not 0.0 < noise_level <= 1.0:
+        raise ValueError(f"noise_level must be in (0, 1], got {noise_level}")
+    opts = {"samples_per_period": samples_per_period, "n_periods": n_periods,
+            "noise_level": 0.0, "free_periods": 1.0, "min_tapping": 0}
+    drawn = _simulate_series(case, **opts)
+    c_drawn = _row_harmonics(drawn.deflection_m, samples_per_period, n_harmonics)
+    n = int(n_periods) * samples_per_period
+    sigma = noise_level * case.free_amplitude_m
+    weight = np.full(n_harmonics + 1, n / (2 * sigma**2))
+    weight[0] = n / sigma**2
+    out: dict[str, dict[str, Any]] = {}
+    for cause in case.causes:
+        rest = tuple(c for c in case.causes if c != cause)
+        twin = _simulate_series(
+            SeriesCase(**{**case.__dict__, "causes": rest,
+                          "effects": {c: case.effects[c] for c in rest}}), **opts)
+        c_twin = _row_harmonics(twin.deflection_m, samples_per_period, n_harmonics)
+        rows = (np.abs(c_drawn - c_twin) ** 2 * weight).sum(axis=1)
+        out[cause] = {"chi2_rows": [float(v) for v in rows], "chi2_total": float(rows.sum()),
+                      "same_branch": bool(np.array_equal(
+                          np.atleast_1d(drawn.scalars["regime"]),
+                          np.atleast_1d(twin.scalars["regime"])))}
+    return out
+
+
+def _row_harmonics(y: FloatArray, spp: int, n_harmonics: int) -> NDArray[np.complex128]:
+    """Complex harmonics 0 - n_harmonics of each row's period average, ``(n_rows, K + 1)``
+    (``y = sum_k Re(c_k exp(i k phi))``; rows of whole periods, the remainder dropped)."""
+    m = y.shape[1] // spp
+    avg = y[:, : m * spp].reshape(y.shape[0], m, spp).mean(axis=1)
+    c = np.fft.rfft(avg, axis=1)[:, : n_harmonics + 1] / spp
+    c[:, 1:] *= 2.0
+    return c

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from afmlearn.diagnose.synthetic import (
     CAUSES,
     EFFECT_PAIRS,
+    SeriesCase,
     draw_case,
     draw_series_case,
+    effect_visibility,
     hidden_series,
     simulate_series,
 )
@@ -132,3 +136,41 @@ def test_series_without_recorded_phase(tmp_path):
     assert np.all(np.isnan(Experiment.read(path).drive_phases_rad))
     with pytest.raises(ValueError, match="n_periods"):
         simulate_series(case, tmp_path / "b.h5", n_periods=1)
+
+
+# ---------------------------------------------------------------------- visibility oracle
+def test_harmonic_noise_units_match_white_noise():
+    """The oracle's unit: a noisy record minus its noise-free twin gives chi2 ~ 2K + 1 per row
+    (K complex harmonics with 2 degrees of freedom, the mean with 1)."""
+    from afmlearn.diagnose.synthetic import _row_harmonics, _simulate_series
+
+    case = draw_series_case(np.random.default_rng([7, 1]), causes="none", n_points=8)
+    opts = {"samples_per_period": 100, "n_periods": 10, "free_periods": 1, "min_tapping": 0}
+    clean = _simulate_series(case, noise_level=0.0, **opts).deflection_m
+    noisy = _simulate_series(case, noise_level=0.01, **opts).deflection_m
+    k, n, sigma = 20, 1000, 0.01 * case.free_amplitude_m
+    w = np.full(k + 1, n / (2 * sigma**2))
+    w[0] = n / sigma**2
+    chi2 = (np.abs(_row_harmonics(clean, 100, k) - _row_harmonics(noisy, 100, k)) ** 2
+            * w).sum(axis=1)
+    # mean of 8 rows: expectation 41, std sqrt(2 * 41 / 8) = 3.2
+    assert abs(chi2.mean() - (2 * k + 1)) < 4 * 3.2, chi2
+
+
+def test_visibility_vanishes_with_the_effect_and_grows_with_it():
+    case = draw_series_case(np.random.default_rng([7, 2]), causes="electrostatic",
+                            n_points=3)
+    assert SeriesCase.from_dict(case.to_dict()) == case
+    opts = {"samples_per_period": 100, "n_periods": 10, "noise_level": 0.01,
+            "n_harmonics": 20}
+    def at(volt: float) -> float:
+        c = SeriesCase(**{**case.__dict__, "effects": {"electrostatic": {"voltage_v": volt}}})
+        v = effect_visibility(c, **opts)["electrostatic"]
+        assert len(v["chi2_rows"]) == 3
+        return v["chi2_total"]
+    assert at(0.0) == 0.0
+    weak, strong = at(1.0), at(3.0)
+    assert 0.0 < weak < strong
+    assert effect_visibility(dataclasses.replace(case, causes=(), effects={}), **opts) == {}
+    with pytest.raises(ValueError, match="n_harmonics"):
+        effect_visibility(case, samples_per_period=100, n_harmonics=50)
