@@ -343,109 +343,213 @@ def series_jobs(settings: list[tuple[int, float]], per_cause: int, pairs: int, p
     return jobs
 
 
-def series_section(records: list[dict], variants: list[tuple[int, bool]]) -> str:
-    """Side-by-side tables (same draws): per cause, share named right for every variant."""
+def upper_bound(k: int, n: int, conf: float = 0.95) -> float:
+    """One-sided ``conf`` Clopper--Pearson upper bound of a rate seen ``k`` times in ``n``."""
+    return 1.0 if k >= n else float(stats.beta.ppf(conf, k + 1, n - k))
+
+
+def _found(r: dict) -> list[str]:
+    return [x["cause"] for x in r["causes_found"]] or [r["cause_found"]]
+
+
+def _hit(r: dict) -> bool:
+    truth = r["cause"]
+    if "+" in truth:
+        return set(truth.split("+")) <= set(_found(r))
+    return r["cause_found"] == truth
+
+
+def _commits(recs: list[dict]) -> str:
+    return ", ".join(sorted({r.get("commit", "?")[:7] for r in recs}))
+
+
+def series_section(records: list[dict], variants: list[tuple[int, bool]],
+                   visibility: dict[tuple, dict] | None = None,
+                   thresholds: dict[str, float] | None = None) -> str:
+    """Side-by-side tables (same draws): per cause and variant the share named right, with
+    how many draws and which commits each cell rests on; the confusion matrix of the first
+    variant; null series with a one-sided 95 % bound; time; the oracle's visible share."""
     causes = list(CAUSES)
+    visibility = visibility or {}
+    if not records:
+        return "No records yet."
     out = [f"Hidden-effect set-point series (`afmlearn.diagnose.synthetic.hidden_series`): "
            f"per draw one cause (or none, or two at once), every other parameter random (Q "
            f"150-450, free amplitude 12-40 nm, 8 set-points spread from 0.80-0.92 down to "
            f"0.30-0.45 of it, a random drive phase per row, effect strengths as in the module), "
-           f"{records[0]['periods'] if records else 0:g} periods per set-point. Each draw is "
-           f"simulated once and diagnosed in every variant (same draws in every column): "
-           f"8 pts = its 8 set-points, 4 pts = every other one, 1 pt = the deepest one alone "
-           f"(one orbit, last 30 % of its periods held out); `phase` = the recorded drive "
-           f"phase given, `no phase` = removed from the file. The diagnosis never sees the "
-           f"labels or the file name; thresholds: the shipped null calibration."
-           ] if records else ["No records yet."]
+           f"{records[0]['periods']:g} periods per set-point. Each draw is simulated once and "
+           f"diagnosed in every variant: 8 pts = its 8 set-points, 4 pts = every other one "
+           f"(rows 2, 4, 6, 8), 1 pt = the deepest one alone (one orbit, last 30 % of its "
+           f"periods held out); `phase` = the recorded drive phase given, `no phase` = the same "
+           f"file with it removed. The diagnosis never sees the labels or the file name; "
+           f"thresholds: the shipped null calibration of the commit measured. Every cell says "
+           f"on how many draws it rests (`k/n`); the commits are listed under each table "
+           f"(records taken on a `git archive` copy of that commit, `--snapshot`)."]
     settings = sorted({(r["spp"], r["noise"]) for r in records}, reverse=True)
     vname = {v: f"{v[0]} pt{'s' if v[0] > 1 else ''}, {'phase' if v[1] else 'no phase'}"
              for v in variants}
+    short = {"none": "none", "higher_mode": "mode", "viscoelastic": "visco",
+             "long_range_damping": "lr-damp", "contact_geometry": "geom",
+             "adhesion_hysteresis": "hyst", "electrostatic": "elec",
+             "detector_nonlinearity": "detect", "error": "error"}
     for spp, noise in settings:
         recs = [r for r in records if (r["spp"], r["noise"]) == (spp, noise)]
-        # only draws with every variant done, so the columns compare the same draws
-        by_draw: dict[tuple, dict] = {}
-        for r in recs:
-            by_draw.setdefault((r["cause"], r["index"]), {})[(r["n_points"], r["phase"])] = r
-        complete = {k: v for k, v in by_draw.items() if all(x in v for x in variants)}
-        rows, null_rows = [], []
-        for c in causes + ["two effects"]:
-            keys = [k for k in complete if (k[0] == c if c != "two effects" else "+" in k[0])]
-            if not keys:
+        by = {v: [r for r in recs if (r["n_points"], r["phase"]) == v] for v in variants}
+        vs = [v for v in variants if by[v]]
+        rows, prov = [], []
+        for c in causes[1:] + ["two effects", "none"]:
+            def sel(rs: list[dict], c: str = c) -> list[dict]:
+                return [r for r in rs if (r["cause"] == c if c != "two effects"
+                                          else "+" in r["cause"])]
+            if not any(sel(by[v]) for v in vs):
                 continue
-            cells = [c, str(len(keys))]
-            for v in variants:
-                ok, gains = 0, []
-                for k in keys:
-                    r = complete[k][v]
-                    found = [x["cause"] for x in r["causes_found"]] or [r["cause_found"]]
-                    if c == "two effects":
-                        hit = set(k[0].split("+")) <= set(found)
-                    else:
-                        hit = r["cause_found"] == c
-                    ok += hit
-                    if hit and c != "none":
-                        gains.append(r["gain"])
-                txt = f"{100 * ok / len(keys):.0f} %"
+            cells, pcells = [c], [c]
+            for v in vs:
+                rs = sel(by[v])
+                if not rs:
+                    cells.append("-")
+                    pcells.append("-")
+                    continue
+                ok = [r for r in rs if _hit(r)] if c != "none" else \
+                    [r for r in rs if r["cause_found"] == "none"]
+                gains = [r["gain"] for r in ok if c != "none"]
+                txt = f"{len(ok)}/{len(rs)} = {100 * len(ok) / len(rs):.0f} %"
                 if gains:
                     txt += f" ({fmt(float(np.median(gains)), 2)})"
                 cells.append(txt)
+                pcells.append(_commits(rs))
             rows.append(cells)
-        eff = [k for k in complete if k[0] != "none"]
-        if eff:
-            first, extra = ["effects: first cause right", str(len(eff))], \
-                ["effects: causes named that are not there", str(len(eff))]
-            later = ["effects: of these, named at a later step", str(len(eff))]
-            for v in variants:
-                hit = n_extra = n_later = 0
-                for k in eff:
-                    r = complete[k][v]
-                    truth = set(k[0].split("+"))
-                    found = [x["cause"] for x in r["causes_found"]]
-                    hit += r["cause_found"] in truth
-                    n_extra += len(set(found) - truth)
-                    n_later += len(set(found[1:]) - truth - set(found[:1]))
-                first.append(f"{100 * hit / len(eff):.0f} %")
-                extra.append(f"{n_extra}")
-                later.append(f"{n_later}")
-            rows += [first, extra, later]
-        errors = [f"{k[0]} ({vname[v]}): {complete[k][v]['error']}" for k in complete
-                  for v in variants if "error" in complete[k][v]]
-        for v in variants:
-            t = np.array([complete[k][v]["t_diag"] for k in complete])
-            null = [complete[k][v] for k in complete if k[0] == "none"]
-            fp = sum(r["cause_found"] != "none" for r in null)
-            null_rows.append([vname[v], f"{fp}/{len(null)}",
-                              f"{np.median(t):.1f}" if t.size else "-",
-                              f"{t.max():.1f}" if t.size else "-"])
-        out.append(f"\n### {spp} samples/period, {100 * noise:g} % noise "
-                   f"({len(complete)} draws with every variant)\n\nShare named right "
-                   f"(median held-out gain when right); `two effects`: both found among the "
-                   f"sequential causes.\n\n"
-                   + md_table(["true cause", "draws", *[vname[v] for v in variants]], rows)
-                   + "\n\n" + md_table(["variant", "false cause on null series",
-                                         "diagnosis time median [s]", "max [s]"], null_rows))
+            prov.append(pcells)
+        out.append(f"\n### {spp} samples/period, {100 * noise:g} % noise\n\nShare named "
+                   f"right, `k/n` (median held-out gain when right); `none`: no cause named; "
+                   f"`two effects`: both found among the sequential causes.\n\n"
+                   + md_table(["true cause", *[vname[v] for v in vs]], rows)
+                   + "\n\nCommits each cell rests on:\n\n"
+                   + md_table(["true cause", *[vname[v] for v in vs]], prov))
+        # confusion matrix of the main variant (first cause named)
+        main = vs[0]
+        labels = causes + ["error"]
+        conf = np.zeros((len(causes), len(labels)), int)
+        for r in by[main]:
+            if r["cause"] in causes:
+                f = r["cause_found"] if r["cause_found"] in labels else "error"
+                conf[causes.index(r["cause"]), labels.index(f)] += 1
+        crow = [[c, *[str(x) for x in conf[i]]] for i, c in enumerate(causes) if conf[i].sum()]
+        if crow:
+            out.append(f"\nConfusion matrix, {vname[main]} (first cause named; one-effect "
+                       f"draws and nulls):\n\n"
+                       + md_table(["true \\ named", *[short[c] for c in labels]], crow))
+        extra_rows = []
+        for v in vs:
+            eff = [r for r in by[v] if r["cause"] != "none"]
+            if not eff:
+                continue
+            first = sum(r["cause_found"] in r["cause"].split("+") for r in eff)
+            extra = sum(len(set(_found(r)) - set(r["cause"].split("+")) - {"none", "error"})
+                        for r in eff)
+            extra_rows.append([vname[v], f"{first}/{len(eff)} = {100 * first / len(eff):.0f} %",
+                               str(extra)])
+        if extra_rows:
+            out.append("\nEffect draws (one and two effects):\n\n" + md_table(
+                ["variant", "first cause right", "causes named that are not there"],
+                extra_rows))
+        # null series and time
+        t_rows = []
+        for v in vs:
+            null = [r for r in by[v] if r["cause"] == "none"]
+            k = sum(r["cause_found"] != "none" for r in null)
+            t = np.array([r["t_diag"] for r in by[v] if "error" not in r])
+            load = np.array([r.get("load", np.nan) for r in by[v]], float)
+            t_rows.append([vname[v], f"{k}/{len(null)}" if null else "-",
+                           f"{100 * upper_bound(k, len(null)):.1f} %" if null else "-",
+                           f"{np.median(t):.1f}" if t.size else "-",
+                           f"{t.max():.1f}" if t.size else "-",
+                           f"{np.nanmedian(load):.1f} ({np.nanmin(load):.1f}-"
+                           f"{np.nanmax(load):.1f})" if np.isfinite(load).any() else "-"])
+        out.append("\n" + md_table(["variant", "false cause on null series",
+                                     "one-sided 95 % upper bound", "diagnosis time median [s]",
+                                     "max [s]", "1-min load median (range)"], t_rows))
+        # oracle: visible draws vs found (8 pts, phase)
+        if visibility and thresholds:
+            v_rows = []
+            for c in causes[1:]:
+                rs = [r for r in by[main] if c in r["cause"].split("+")]
+                vis = [r for r in rs if visibility.get(_draw_key(r), {}).get(c, {})
+                       .get("chi2_total", 0.0) > thresholds.get(c, np.inf)]
+                known = [r for r in rs if _draw_key(r) in visibility]
+                if not known:
+                    continue
+                found_vis = sum(c in _found(r) for r in vis)
+                found_all = sum(c in _found(r) for r in known)
+                med = np.median([visibility[_draw_key(r)][c]["chi2_total"] for r in known])
+                v_rows.append([c, str(len(known)), f"{len(vis)}", f"{found_vis}/{len(vis)}",
+                               f"{found_all - found_vis}/{len(known) - len(vis)}",
+                               fmt(float(med), 2)])
+            if v_rows:
+                out.append(f"\nVisible draws ({vname[main]}): the oracle "
+                           f"(`synthetic.effect_visibility`, truth vs its effect-free twin at "
+                           f"the drawn parameters, harmonics 0-30 in noise units) above the "
+                           f"cause's threshold. It bounds any drop from above (the baseline "
+                           f"refits), so `visible` is necessary, not sufficient.\n\n"
+                           + md_table(["cause (in one- or two-effect draws)", "draws",
+                                       "visible", "found / visible", "found / not visible",
+                                       "median oracle chi2"], v_rows))
+        errors = [f"{r['cause']} #{r['index']} ({vname[v]}): {r['error']}" for v in vs
+                  for r in by[v] if "error" in r]
         if errors:
             out.append("\nDiagnoses that raised (counted as wrong): " + "; ".join(errors))
-        conf = [complete[k] for k in complete if k[0] == "contact_geometry"]
-        if conf:
-            ex_rows = []
-            for v in variants:
-                errs, widths = [], []
-                for d in conf:
-                    r = d[v]
-                    p_true = r["case"]["effects"]["contact_geometry"]["exponent"]
-                    if r.get("exponent") is not None:
-                        errs.append(abs(r["exponent"] - p_true))
-                    if r.get("exponent_interval"):
-                        lo, hi = r["exponent_interval"]
-                        widths.append(hi - lo)
-                ex_rows.append([vname[v], f"{fmt(float(np.median(errs)), 2)}" if errs else "-",
+        conf_draws = [r for r in by[main] if r["cause"] == "contact_geometry"]
+        ex_rows = []
+        for v in vs:
+            errs, widths = [], []
+            for r in by[v]:
+                if r["cause"] != "contact_geometry":
+                    continue
+                p_true = r["case"]["effects"]["contact_geometry"]["exponent"]
+                if r.get("exponent") is not None:
+                    errs.append(abs(r["exponent"] - p_true))
+                if r.get("exponent_interval"):
+                    lo, hi = r["exponent_interval"]
+                    widths.append(hi - lo)
+            if errs:
+                ex_rows.append([vname[v], fmt(float(np.median(errs)), 2),
                                 f"{sum(e <= 0.1 for e in errs)}/{len(errs)}",
-                                f"{fmt(float(np.median(widths)), 2)}" if widths else "-"])
-            out.append("\nContact exponent on the `contact_geometry` draws (true p 1.9-2.4):\n\n"
-                       + md_table(["variant", "median abs(p - p_true)", "within 0.1",
-                                   "median 95 % interval width"], ex_rows))
+                                fmt(float(np.median(widths)), 2) if widths else "-"])
+        if conf_draws and ex_rows:
+            out.append("\nContact exponent on the `contact_geometry` draws (true p 1.9-2.4):"
+                       "\n\n" + md_table(["variant", "median abs(p - p_true)", "within 0.1",
+                                           "median 95 % interval width"], ex_rows))
     return "\n".join(out)
+
+
+def _draw_key(r: dict) -> tuple:
+    return (r["set_id"], r["spp"], r["noise"], r["cause"], r["index"], r["seed"], r["periods"])
+
+
+def visibility_pass(records: list[dict], path: Path, n_harmonics: int = 30) -> dict[tuple, dict]:
+    """The oracle (:func:`afmlearn.diagnose.synthetic.effect_visibility`) of every effect draw
+    in ``records`` (resumable: one JSON line per draw in ``path``)."""
+    from afmlearn.diagnose.synthetic import SeriesCase, effect_visibility
+
+    out: dict[tuple, dict] = {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            if line.strip():
+                r = json.loads(line)
+                out[tuple(r["key"])] = r["visibility"]
+    todo = {}
+    for r in records:
+        if r["cause"] != "none" and _draw_key(r) not in out:
+            todo[_draw_key(r)] = r
+    with open(path, "a") as f:
+        for k, r in tqdm(todo.items(), desc="visibility", disable=None):
+            vis = effect_visibility(SeriesCase.from_dict(r["case"]), samples_per_period=r["spp"],
+                                    n_periods=r["periods"], noise_level=r["noise"],
+                                    n_harmonics=n_harmonics)
+            f.write(json.dumps({"key": list(k), "visibility": vis}) + "\n")
+            f.flush()
+            out[k] = vis
+    return out
 
 
 def series_calibrate(args: argparse.Namespace, settings: list[tuple[int, float]],
@@ -516,7 +620,11 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
         recs = [have[_series_key(j)] for j in jobs if _series_key(j) in have]
     else:
         recs = run_series_jobs(jobs, rec_dir / "series.jsonl", args.workers, since=args.since)
-    body = series_section(recs, variants)
+    vis_path = rec_dir / "visibility.jsonl"
+    vis = visibility_pass(recs, vis_path) if args.visibility else (
+        visibility_pass([], vis_path) if vis_path.exists() else {})
+    thr = json.loads(CALIBRATION.read_text()).get("series", {}).get("thresholds")
+    body = series_section(recs, variants, vis, thr)
     if args.note:
         body += "\n\n" + args.note
     write_section("diagnose_series", "Diagnosis on set-point series: one orbit vs 4 vs 8 "
@@ -551,6 +659,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="series: comma-separated single causes to draw (default: all)")
     ap.add_argument("--variants", default="1:phase,4:phase,8:phase,1:none,4:none,8:none",
                     help="series: comma-separated n_points:phase|none")
+    ap.add_argument("--visibility", action="store_true",
+                    help="series: compute the oracle visibility of every effect draw first")
     ap.add_argument("--since", default="",
                     help="series: stored records count as done only if taken on this commit "
                          "or a later one (re-run what a change affects)")
