@@ -258,7 +258,7 @@ def _series_job(job: dict) -> dict:
         exp = Experiment([dataclasses.replace(t, drive_phase_rad=None) for t in exp],
                          kind=exp.kind)
     exp = exp.subset(SUBSETS[job["n_points"]])
-    t1 = time.perf_counter()
+    t1, c1 = time.perf_counter(), time.process_time()
     try:
         d = Diagnoser().fit(exp if len(exp) > 1 else exp[0])
     except Exception as err:  # noqa: BLE001 -- a failed diagnosis is a result to report
@@ -269,7 +269,8 @@ def _series_job(job: dict) -> dict:
                 "candidates": []}
     t_diag = time.perf_counter() - t1
     ivl = getattr(d, "exponent_interval_", None)
-    return {**job, "case": case, "t_sim": t_sim, "t_diag": t_diag, "commit": code_version(),
+    return {**job, "case": case, "t_sim": t_sim, "t_diag": t_diag,
+            "t_cpu": time.process_time() - c1, "commit": code_version(),
             "load": os.getloadavg()[0],
             "baseline_nrmse": d.baseline_nrmse_, "extended_nrmse": d.extended_nrmse_,
             "cause_found": d.cause_, "gain": d.gain_,
@@ -459,16 +460,19 @@ def series_section(records: list[dict], variants: list[tuple[int, bool]],
             null = [r for r in by[v] if r["cause"] == "none"]
             k = sum(r["cause_found"] != "none" for r in null)
             t = np.array([r["t_diag"] for r in by[v] if "error" not in r])
+            cpu = np.array([r["t_cpu"] for r in by[v] if "t_cpu" in r])
             load = np.array([r.get("load", np.nan) for r in by[v]], float)
             t_rows.append([vname[v], f"{k}/{len(null)}" if null else "-",
                            f"{100 * upper_bound(k, len(null)):.1f} %" if null else "-",
                            f"{np.median(t):.1f}" if t.size else "-",
                            f"{t.max():.1f}" if t.size else "-",
+                           f"{np.median(cpu):.1f} / {cpu.max():.1f}" if cpu.size else "-",
                            f"{np.nanmedian(load):.1f} ({np.nanmin(load):.1f}-"
                            f"{np.nanmax(load):.1f})" if np.isfinite(load).any() else "-"])
         out.append("\n" + md_table(["variant", "false cause on null series",
                                      "one-sided 95 % upper bound", "diagnosis time median [s]",
-                                     "max [s]", "1-min load median (range)"], t_rows))
+                                     "max [s]", "CPU time median / max [s]",
+                                     "1-min load median (range)"], t_rows))
         # oracle: visible draws vs found (8 pts, phase)
         if visibility and thresholds:
             v_rows = []
