@@ -236,7 +236,8 @@ def group_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
         ``majority`` (the most frequent cause) and ``agreement`` (its fraction of the analysed
         curves); ``n_named`` (curves with a cause), ``gain_positive`` (fraction of those whose
         extended model predicts the retraction better than the baseline), ``median_gain``
-        (over them); ``seconds`` (median, max wall clock per curve) and ``load`` (median
+        (over them); ``seconds`` (median, max wall clock per curve), ``cpu_seconds`` (median
+        CPU time per curve) and ``load`` (median
         1-minute load average during the runs).
     """
     ok = [r for r in rows if "cause" in r]
@@ -247,6 +248,8 @@ def group_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
     named = [r for r in ok if r["cause"] != "none"]
     gains = np.array([r["gain"] for r in named], dtype=float)
     secs = np.array([r["seconds"] for r in ok if r.get("seconds") is not None], dtype=float)
+    cpu = np.array([r["cpu_seconds"] for r in ok if r.get("cpu_seconds") is not None],
+                   dtype=float)
     loads = np.array([r["load"] for r in ok if r.get("load") is not None], dtype=float)
     return {"n": len(rows), "errors": len(rows) - len(ok), "causes": causes,
             "majority": majority,
@@ -256,6 +259,7 @@ def group_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
             "median_gain": float(np.median(gains)) if named else float("nan"),
             "seconds": ([float(np.median(secs)), float(np.max(secs))] if secs.size
                         else None),
+            "cpu_seconds": float(np.median(cpu)) if cpu.size else None,
             "load": float(np.median(loads)) if loads.size else None}
 
 
@@ -270,22 +274,25 @@ def _row(rep: dict[str, Any]) -> dict[str, Any]:
             "heldout_nrmse_extended": rep["extended"]["heldout_nrmse"],
             "parameters": rep["extended"]["parameters"],
             "baseline_parameters": rep["baseline"]["parameters"],
-            "seconds": rep.get("seconds"), "load": rep.get("load")}
+            "seconds": rep.get("seconds"), "cpu_seconds": rep.get("cpu_seconds"),
+            "load": rep.get("load")}
 
 
 def _analyze_timed(path: Path, sub: Path, make_diagnoser, figures) -> None:
     """``analyze_curve`` plus its wall-clock time and the load average in the report."""
     load = os.getloadavg()[0]
     t0 = time.perf_counter()
+    c0 = time.process_time()
     rep = analyze_curve(path, sub, diagnoser=make_diagnoser(), figures=figures)
     rep["seconds"] = time.perf_counter() - t0
+    rep["cpu_seconds"] = time.process_time() - c0  # this process's own CPU (the forked child)
     rep["load"] = load
     write_json(sub / "report.json", rep)
 
 
-def _child(path, sub, make_diagnoser, figures, conn) -> None:  # pragma: no cover (child)
+def _child(target, args, conn) -> None:  # pragma: no cover (child)
     try:
-        _analyze_timed(path, sub, make_diagnoser, figures)
+        target(*args)
         conn.send(None)
     except Exception as err:  # noqa: BLE001 - any failure of one curve is recorded, not raised
         conn.send(f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}")
@@ -293,15 +300,22 @@ def _child(path, sub, make_diagnoser, figures, conn) -> None:  # pragma: no cove
 
 def _run_one(path: Path, sub: Path, make_diagnoser, figures, time_limit_s) -> str | None:
     """Analyse one curve (in a child process under the time limit); the error line or None."""
+    return _run_limited(_analyze_timed, (path, sub, make_diagnoser, figures), time_limit_s)
+
+
+def _run_limited(target: Callable[..., None], args: tuple, time_limit_s: float | None
+                 ) -> str | None:
+    """``target(*args)`` in a forked child under ``time_limit_s`` (None: in this process,
+    ValueErrors caught); the one-line error or None."""
     if time_limit_s is None:
         try:
-            _analyze_timed(path, sub, make_diagnoser, figures)
+            target(*args)
         except ValueError as err:
             return str(err).splitlines()[0]
         return None
     ctx = mp.get_context("fork")
     recv, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(path, sub, make_diagnoser, figures, send))
+    proc = ctx.Process(target=_child, args=(target, args, send))
     proc.start()
     send.close()
     try:

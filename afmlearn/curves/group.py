@@ -249,8 +249,16 @@ class GroupFitter:
             if self._drift is not None:
                 x.append(cv.get(DRIFT, self._drift.init))
         law = values["law"]
-        x += [_enc(p, law.get(p.field, p.init)) for p in self._shared]
+        x += [_enc(p, law.get(p.field, self._default(p))) for p in self._shared]
         return np.clip(np.array(x, dtype=float), self._lo + 1e-9, self._hi - 1e-9)
+
+    def _default(self, p: Parameter) -> float:
+        """A parameter missing from a start: the baseline law's own value where that is a
+        valid one (the exponent 1.5), else the parameter's ``init``."""
+        v = getattr(self._base, p.field, None)
+        if v is not None and p.low <= v <= p.high and (v > 0.0 or not p.log):
+            return float(v)
+        return p.init
 
     def _decode(self, x: NDArray[np.float64]) -> dict:
         k = self._n_nuis

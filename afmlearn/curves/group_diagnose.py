@@ -171,7 +171,8 @@ class GroupDiagnoser:
             chi2 = min(f.chi2_, b.chi2_)
             k = sum(len(curves) if p.field == DRIFT else 1 for p in h.parameters)
             evidence = n * math.log(b.chi2_ / max(chi2, 1e-300)) - k * math.log(n)
-            e_ret = retraction_nrmse(f)
+            # an extension that fits no better than the baseline is the baseline (it nests it)
+            e_ret = retraction_nrmse(f) if f.chi2_ < b.chi2_ else b_ret
             cands.append({"cause": h.cause, "evidence": float(evidence),
                           "gain_retraction": 1.0 - e_ret / b_ret if b_ret > 0 else math.nan,
                           "chi2": float(chi2), "n_parameters": k, "gain_loo": None})

@@ -1,0 +1,132 @@
+"""Joint fit of one law across curves of one tip at several free amplitudes: the block
+Jacobian against a plain one, recovery of a shared law, the joint diagnosis and its
+leave-one-curve-out gain, the lever check and the sets of a folder."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from afmlearn.curves import Curve, CurveLaw, SlowFlowModel
+from afmlearn.curves.analyze_group import split_sets
+from afmlearn.curves.group import GroupFitter, check_same_lever
+from afmlearn.curves.group_diagnose import GroupDiagnoser
+from afmlearn.curves.hypotheses import EXTENSIONS
+from afmlearn.curves.transfer import rescale_law
+
+K_N, Q, F0 = 2.7, 150.0, 70e3
+L1 = 20e-9
+#: one SI law with long-range damping, written in units of L1 = 20 nm
+DAMPED = CurveLaw(a0=0.3e-9 / L1, vdw=2e-6, stiffness=40.0, damping=2e-3, decay_length=0.2,
+                  radius=10e-9 / L1)
+DAMPING = next(h for h in EXTENSIONS if h.cause == "long_range_damping")
+VISCO = next(h for h in EXTENSIONS if h.cause == "viscoelastic")
+
+
+def synthetic(law1: CurveLaw, length_m: float, offset: float, *, seed: int | None = None,
+              n: int = 200, k_n: float = K_N) -> Curve:
+    """An approach--retract curve of free amplitude ``length_m`` made by the model, with 1 %
+    amplitude and 0.5 deg phase noise when ``seed`` is given."""
+    law = rescale_law(law1, L1 / length_m)
+    tau = 2 * math.pi * 6 * np.arange(2 * n)
+    gap = np.concatenate([np.linspace(2.0, 0.3, n), np.linspace(0.3, 2.0, n)])
+    model = SlowFlowModel(quality_factor=Q, omega=1.0, drive=1.0 / Q, step=4 * math.pi)
+    amp, phi = model.predict(law, tau, gap)
+    if seed is not None:
+        rng = np.random.default_rng(seed)
+        amp = amp + 0.01 * rng.standard_normal(amp.size)
+        phi = phi + math.radians(0.5) * rng.standard_normal(phi.size)
+    return Curve(tau=tau, amplitude=amp, phase=phi, z_piezo=gap + offset,
+                 segment=np.repeat(np.array([0, 1], dtype=np.int8), n), quality_factor=Q,
+                 spring_constant_n_per_m=k_n, resonance_frequency_hz=F0, length_m=length_m,
+                 drive_frequency_hz=F0)
+
+
+def true_start(fitter_law: CurveLaw, curves: list[Curve], offsets: list[float]) -> dict:
+    return {"law": {k: getattr(fitter_law, k) for k in ("vdw", "stiffness", "damping",
+                                                         "decay_length")},
+            "curves": [{"offset": o, "omega": 1.0} for o in offsets]}
+
+
+def test_block_jacobian_equals_the_plain_one():
+    """A nuisance column moves only its own curve: the block Jacobian equals the dense
+    finite-difference Jacobian of the concatenated residual."""
+    curves = [synthetic(DAMPED, L, 1.0, n=60) for L in (15e-9, 30e-9)]
+    f = GroupFitter(hypothesis=DAMPING, max_nfev=1, rescales=((1.0, 1.0),),
+                    start={"law": {"vdw": 1.5e-6, "stiffness": 30.0, "damping": 1e-3,
+                                   "decay_length": 0.3},
+                           "curves": [{"offset": 1.02, "omega": 1.0001}] * 2}).fit(curves)
+    x = f.x_.copy()
+    jac = f._jacobian(x)
+    r0 = f._residual(x)
+    plain = np.zeros_like(jac)
+    for j in range(x.size):
+        y = x.copy()
+        h = 1e-4 * max(1.0, abs(x[j]))
+        y[j] = x[j] + h if x[j] + h <= f._hi[j] else x[j] - h
+        plain[:, j] = (f._residual(y) - r0) / (y[j] - x[j])
+    np.testing.assert_allclose(jac, plain, rtol=1e-10, atol=1e-10)
+    # the nuisance of curve 0 does not move curve 1's residual
+    m0 = curves[0].segment.tolist().count(0) * 2
+    assert np.all(jac[m0:, 0] == 0.0) and np.any(jac[:m0, 0] != 0.0)
+
+
+def test_joint_fit_recovers_the_shared_law_from_a_perturbed_start():
+    """Three noisy curves at 15, 25 and 40 nm of one damped tip: the joint law (group unit)
+    returns to the truth from a start 50 % off, each curve's surface position to 1 %."""
+    lengths = (15e-9, 25e-9, 40e-9)
+    curves = [synthetic(DAMPED, L, 1.0, seed=i, n=150) for i, L in enumerate(lengths)]
+    probe = GroupFitter(hypothesis=DAMPING, max_nfev=1,
+                        start=true_start(DAMPED, curves, [1.0] * 3)).fit(curves)
+    truth = rescale_law(DAMPED, L1 / probe.length_m_)
+    start = {"law": {"vdw": truth.vdw * 1.5, "stiffness": truth.stiffness * 0.6,
+                     "damping": truth.damping * 0.5, "decay_length": truth.decay_length * 1.4},
+             "curves": [{"offset": 1.03, "omega": 1.0}] * 3}
+    fit = GroupFitter(hypothesis=DAMPING, start=start, rescales=((1.0, 1.0),),
+                      max_nfev=30).fit(curves)
+    assert fit.law_.damping == pytest.approx(truth.damping, rel=0.15)
+    assert fit.law_.decay_length == pytest.approx(truth.decay_length, rel=0.15)
+    for cv in fit.values_["curves"]:
+        assert cv["offset"] == pytest.approx(1.0, abs=0.01)
+    # at the noise level: chi2 per residual near 1
+    assert fit.chi2_ / fit.n_fit_ < 1.5
+
+
+def test_joint_diagnosis_names_damping_with_a_positive_left_out_gain():
+    """Damped curves at 15 and 35 nm: the joint diagnosis (damping vs visco) names damping and
+    the law fitted on one curve predicts the other better than the baseline does."""
+    curves = [synthetic(DAMPED, L, 1.0, seed=10 + i, n=150)
+              for i, L in enumerate((15e-9, 35e-9))]
+    d = GroupDiagnoser(hypotheses=(VISCO, DAMPING), max_evaluations=1000).fit(curves)
+    assert d.cause_ == "long_range_damping"
+    assert d.gain_ > 0.05
+    assert len(d.loo_["none"]) == 2 and len(d.loo_["long_range_damping"]) == 2
+    assert d.n_evaluations_ <= 1000 + 50  # the final residuals are always computed
+    rep = d.report()
+    for key in ("cause", "confidence", "baseline", "extended", "gain", "candidates", "causes",
+                "figures", "group"):
+        assert key in rep
+    assert rep["group"]["n_curves"] == 2
+
+
+def test_curves_of_different_levers_are_refused():
+    a = synthetic(DAMPED, 15e-9, 1.0, n=30)
+    b = synthetic(DAMPED, 25e-9, 1.0, n=30, k_n=2 * K_N)
+    with pytest.raises(ValueError, match="spring_constant_n_per_m"):
+        check_same_lever([a, b])
+    with pytest.raises(ValueError, match="spring_constant_n_per_m"):
+        GroupFitter().fit([a, b])
+
+
+def test_sets_span_the_free_amplitudes():
+    lengths = [30.0, 10.0, 50.0, 20.0, 60.0, 40.0, 70.0]
+    sets = split_sets(lengths, 3)
+    assert len(sets) == 2
+    for s in sets:
+        vals = sorted(lengths[i] for i in s)
+        assert vals[0] <= 20.0 and vals[-1] >= 50.0   # low and high amplitudes in every set
+    assert len({i for s in sets for i in s}) == 6
+    with pytest.raises(ValueError, match="group_size"):
+        split_sets(lengths, 0)
