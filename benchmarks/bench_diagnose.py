@@ -566,7 +566,9 @@ def series_calibrate(args: argparse.Namespace, settings: list[tuple[int, float]]
              "seed": args.seed, "periods": args.periods, "n_points": 8, "phase": True,
              "files": str(rec_dir / "series_null_files")}
             for i in range(args.null) for spp, noise in settings]
-    recs = run_series_jobs(jobs, rec_dir / "series_null.jsonl", args.workers)
+    recs = run_series_jobs(jobs, rec_dir / "series_null.jsonl", args.workers, since=args.since)
+    if args.keep_thresholds:
+        return series_null_check(recs, rec_dir, args)
     ok = [r for r in recs if r.get("candidates")]
     if not ok:
         print("no null series diagnosed yet")
@@ -590,6 +592,70 @@ def series_calibrate(args: argparse.Namespace, settings: list[tuple[int, float]]
         os.replace(tmp, CALIBRATION)
     print("series thresholds:", calib.thresholds)
     print(src)
+    return 0
+
+
+def null_table(nulls: list[dict]) -> str:
+    """False-cause rate on null series per setting and variant, with the one-sided 95 %
+    Clopper--Pearson bound, and how close the first-step drops came to the thresholds."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in nulls:
+        groups.setdefault((r["spp"], r["noise"], r["n_points"], r["phase"]), []).append(r)
+    rows = []
+    for (spp, noise, n_pts, phase), rs in sorted(groups.items(), reverse=True):
+        ok = [r for r in rs if r.get("candidates")]
+        k = sum(r["cause_found"] != "none" for r in rs)       # a raise is not a false cause
+        above = sum(any(c["delta_chi2"] > c["threshold"] for c in r["candidates"]) for r in ok)
+        ratio = [max(c["delta_chi2"] / c["threshold"] for c in r["candidates"]) for r in ok]
+        rows.append([f"{spp} spp, {100 * noise:g} %", f"{n_pts} pt{'s' if n_pts > 1 else ''}, "
+                     f"{'phase' if phase else 'no phase'}", str(len(rs)), f"{k}/{len(rs)}",
+                     f"{100 * upper_bound(k, len(rs)):.1f} %", f"{above}/{len(ok)}",
+                     fmt(float(np.median(ratio)), 2) if ratio else "-",
+                     fmt(float(np.max(ratio)), 3) if ratio else "-",
+                     str(len(rs) - len(ok)), _commits(rs)])
+    return md_table(["setting", "variant", "null series", "cause named (false)",
+                     "one-sided 95 % upper bound", "a first-step drop above its threshold",
+                     "largest drop / threshold: median", "max", "raised", "commits"], rows)
+
+
+def _latest(path: Path, since: str = "") -> list[dict]:
+    """The last record of each key in a JSON-lines file (taken on ``since`` or later)."""
+    accept = _since(since) if since else (lambda r: True)
+    last: dict[tuple, dict] = {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            if line.strip():
+                r = json.loads(line)
+                if accept(r):
+                    last[_series_key(r)] = r
+    return list(last.values())
+
+
+def series_null_check(recs: list[dict], rec_dir: Path, args: argparse.Namespace) -> int:
+    """``--keep-thresholds``: pool the calibration nulls with the evaluation's null draws
+    (``series.jsonl``, disjoint seeds), report the false-cause rate with the shipped
+    thresholds and write it into the ``"series"`` source of ``null_calibration.json``."""
+    pool = list(recs) + [r for r in _latest(rec_dir / "series.jsonl", args.since)
+                         if r["cause"] == "none"]
+    table = null_table(pool)
+    print(table)
+    main = [r for r in pool if r["n_points"] == 8 and r["phase"] and r["spp"] == 200]
+    if not main:
+        return 1
+    k = sum(r["cause_found"] != "none" for r in main)
+    d = json.loads(CALIBRATION.read_text())
+    sec = d["series"]
+    base = sec["source"].split("; re-checked")[0]
+    sec["source"] = (base + f"; re-checked (bench_diagnose.py --series --calibrate "
+                     f"--keep-thresholds, thresholds unchanged) on {len(main)} null 8-set-point "
+                     f"series at 200 spp / 1 %, drive phase recorded, commits "
+                     f"{_commits(main)}: {k} named a cause, one-sided 95 % upper bound on the "
+                     f"family-wise false-cause rate {100 * upper_bound(k, len(main)):.1f} %")
+    if not args.no_doc:
+        tmp = CALIBRATION.with_suffix(".json.tmp")
+        tmp.write_text(json.dumps(d, indent=1) + "\n")
+        os.replace(tmp, CALIBRATION)
+    print(sec["source"])
     return 0
 
 
@@ -629,6 +695,15 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
         visibility_pass([], vis_path) if vis_path.exists() else {})
     thr = json.loads(CALIBRATION.read_text()).get("series", {}).get("thresholds")
     body = series_section(recs, variants, vis, thr)
+    nulls = _latest(rec_dir / "series_null.jsonl", args.since) + [
+        r for r in _latest(rec_dir / "series.jsonl", args.since) if r["cause"] == "none"]
+    if nulls:
+        body += ("\n\n### Null series: false-cause rate with the shipped thresholds\n\n"
+                 "Calibration nulls (`--calibrate --keep-thresholds`, seeds disjoint from the "
+                 "evaluation draws) pooled with the evaluation's null draws; a false cause = "
+                 "a cause named (drop above its threshold and held-out gain above 0.05). The "
+                 "bound is the one-sided 95 % Clopper-Pearson bound of the family-wise "
+                 "false-cause rate.\n\n" + null_table(nulls))
     if args.note:
         body += "\n\n" + args.note
     write_section("diagnose_series", "Diagnosis on set-point series: one orbit vs 4 vs 8 "
@@ -663,6 +738,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="series: comma-separated single causes to draw (default: all)")
     ap.add_argument("--variants", default="1:phase,4:phase,8:phase,1:none,4:none,8:none",
                     help="series: comma-separated n_points:phase|none")
+    ap.add_argument("--keep-thresholds", action="store_true",
+                    help="series --calibrate: keep the shipped thresholds, report and record "
+                         "the false-cause rate on the null series (with the evaluation's)")
     ap.add_argument("--visibility", action="store_true",
                     help="series: compute the oracle visibility of every effect draw first")
     ap.add_argument("--since", default="",
