@@ -284,10 +284,15 @@ class SeriesCase:
     extra: tuple[str, ...] = ()
     seed: int = 0
     settle: int = SETTLE_PERIODS
+    #: free amplitude / the lever's rest-gap unit per row (empty: the config's for every row);
+    #: rows at another free amplitude reach other indentations
+    amplitudes: tuple[float, ...] = ()
 
     def row_case(self, i: int) -> Case:
+        amp = (f"excitation.free_amplitude_ratio={self.amplitudes[i]:.6g}",) \
+            if self.amplitudes else ()
         return Case(self.force, self.noise, self.spp, self.periods,
-                    extra=(*self.extra, f"scenario.gap={self.gaps[i]:.6g}"),
+                    extra=(*self.extra, *amp, f"scenario.gap={self.gaps[i]:.6g}"),
                     seed=1000 * self.seed + i)
 
 

@@ -436,24 +436,35 @@ JOINT_GAPS = (0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.3, 1.4)
 #: which rows form the 1- and 4-set-point experiments (the same draws as the 8)
 JOINT_SUBSETS = {1: (3,), 4: (0, 2, 5, 7), 8: tuple(range(8))}
 JOINT_SETTINGS = {"200spp_1pct": (0.01, 200), "1000spp_0.5pct": (0.005, 1000)}
+#: the two-free-amplitude experiment ("8x2A"): 4 set-points at the series' free amplitude
+#: (1.5 L_ref, the rest gaps of JOINT_SUBSETS[4]) and 4 at three times it (set-points 0.47 -
+#: 0.93 of 4.5 L_ref); the indentation then spans 0.05 - 0.13 L_ref instead of 0.056 - 0.067
+JOINT_TWO_AMP_GAPS = (0.7, 0.9, 1.2, 1.4, 2.1, 2.7, 3.6, 4.2)
+JOINT_TWO_AMP_RATIOS = (1.5,) * 4 + (4.5,) * 4
 
 
-def joint_series(p: float, setting: str, *, periods: int, seed: int = 0) -> IC.SeriesCase:
+def joint_series(p: float, setting: str, *, periods: int, seed: int = 0,
+                 two_amplitudes: bool = False) -> IC.SeriesCase:
     noise, spp = JOINT_SETTINGS[setting]
     c = exponent_case(p, noise=noise, spp=spp, periods=periods)
+    if two_amplitudes:
+        return IC.SeriesCase(c.force, noise, spp, periods, gaps=JOINT_TWO_AMP_GAPS,
+                             extra=c.extra, seed=seed, settle=1200,
+                             amplitudes=JOINT_TWO_AMP_RATIOS)
     return IC.SeriesCase(c.force, noise, spp, periods, gaps=JOINT_GAPS, extra=c.extra,
                          seed=seed, settle=1200)
 
 
-def run_joint(scase: IC.SeriesCase, n_obs: int, recorded: bool) -> dict[str, Any]:
-    """One joint identification of the first ``n_obs`` subset of a series; scored vs truth."""
+def run_joint(scase: IC.SeriesCase, n_obs: int | str, recorded: bool) -> dict[str, Any]:
+    """One joint identification of the ``n_obs`` subset of a series (``JOINT_SUBSETS``; "8x2A":
+    every row of a two-amplitude series); scored vs truth."""
     from afmlearn.identify.drive import FittedPhase, RecordedPhase
     from afmlearn.identify.identifier import ForceIdentifier
     from afmlearn.io import Experiment
     from afmlearn.metrics import force_accuracy
 
     d = IC.series_for(scase)
-    sel = list(JOINT_SUBSETS[n_obs])
+    sel = list(range(len(scase.gaps))) if n_obs == "8x2A" else list(JOINT_SUBSETS[int(n_obs)])
     traces = [d.traces[i] for i in sel]
     if not recorded:
         traces = [dataclasses.replace(t, drive_phase_rad=None) for t in traces]
@@ -468,7 +479,10 @@ def run_joint(scase: IC.SeriesCase, n_obs: int, recorded: bool) -> dict[str, Any
     z_true = np.concatenate([d.z[i] for i in sel])
     acc = force_accuracy(f_pred, f_true, z_true, d.a0)
     s = ide.summary_
-    return {"exponent": s.get("interaction_exponent"),
+    ex = ide.joint_.exponent or {}
+    return {"a0_over_true": float(ide.joint_.a0 * scale / d.a0),
+            "profile": np.asarray(ex.get("profile", np.empty((0, 2)))).tolist(),
+            "exponent": s.get("interaction_exponent"),
             "interval": s.get("interaction_exponent_interval"),
             "bounded": s.get("interaction_exponent_bounded"),
             "cv_interval": s.get("interaction_exponent_cv_interval"),
@@ -486,8 +500,15 @@ def main_joint(argv: list[str] | None = None) -> str:
                     help="1000 spp / 0.5 %: p = 1.5 only; the fitted drive phase: p = 1.5 at "
                          "200 spp / 1 % only")
     ap.add_argument("--periods", type=int, default=60)
-    ap.add_argument("--points", default="1,4,8",
-                    help="comma-separated set-point counts to run (from 1, 4, 8)")
+    ap.add_argument("--points", default="1,4,8,8x2A",
+                    help="comma-separated set-point counts to run (from 1, 4, 8, and 8x2A: "
+                         "8 set-points at two free amplitudes)")
+    ap.add_argument("--exponents", default=None,
+                    help="comma-separated true exponents to run (default: 1.5, 2.0, 2.27)")
+    ap.add_argument("--settings", default=None,
+                    help=f"comma-separated settings to run (from {', '.join(JOINT_SETTINGS)})")
+    ap.add_argument("--phase", choices=("rec", "fit", "both"), default="both",
+                    help="recorded drive phase, fitted, or both")
     ap.add_argument("--cached-only", action="store_true",
                     help="write the table from finished cases only (no new fits)")
     C.add_doc_flag(ap)
@@ -495,31 +516,46 @@ def main_joint(argv: list[str] | None = None) -> str:
     info = C.machine_info()
     store = Store(IC.CACHE / "results_joint.json")
     grid = []
-    for setting in JOINT_SETTINGS:
-        for p in EXPONENTS:
+    exps = EXPONENTS if args.exponents is None else [float(v) for v in args.exponents.split(",")]
+    sets = list(JOINT_SETTINGS) if args.settings is None else args.settings.split(",")
+    phases = {"rec": (True,), "fit": (False,), "both": (True, False)}[args.phase]
+    for setting in sets:
+        for p in exps:
             if args.reduced and setting != "200spp_1pct" and p != 1.5:
                 continue
-            for recorded in (True, False):
+            for recorded in phases:
                 if args.reduced and not recorded and (p != 1.5 or setting != "200spp_1pct"):
                     continue
-                for n in (1, 4, 8):
+                for n in (1, 4, 8, "8x2A"):
                     if str(n) in args.points.split(","):
                         grid.append((p, setting, recorded, n))
-    rows = []
-    for (p, setting, recorded, n), stage in itertools.product(grid, ("ee", "oe")):
+    def key_of(p: float, setting: str, recorded: bool, n: int | str, stage: str) -> str:
         # "ee": records of the equation-error joint fit (before the output-error stage; kept
         # from earlier runs, not re-run); "oe": the joint fit with its output-error stage
         key = f"joint/{p}/{setting}/{args.periods}/{'rec' if recorded else 'fit'}/{n}"
-        key += "/oe" if stage == "oe" else ""
-        rec = store.data.get(key)
-        if rec is None and (args.cached_only or stage == "ee"):
-            continue
-        if rec is None:
+        return key + ("/oe" if stage == "oe" else "")
+
+    if not args.cached_only:
+        # the most telling records first: 200 spp, recorded phase, 8 set-points (two
+        # amplitudes, one), then fewer set-points, the fitted phase, 1,000 spp
+        order = {"8x2A": 0, 8: 1, 4: 2, 1: 3}
+        for p, setting, recorded, n in sorted(grid, key=lambda g: (
+                g[1] != "200spp_1pct", not g[2], order[g[3]], g[0])):
+            key = key_of(p, setting, recorded, n, "oe")
+            if key in store.data:
+                continue
             print(f"[joint] {key}", flush=True)
-            rec = run_joint(joint_series(p, setting, periods=args.periods), n, recorded)
+            rec = run_joint(joint_series(p, setting, periods=args.periods,
+                                         two_amplitudes=n == "8x2A"), n, recorded)
             rec["git"] = git_short()
+            rec["identify_hash"] = identify_hash()
             rec["load"] = os.getloadavg()[0]
             store.put(key, rec)
+    rows = []
+    for (p, setting, recorded, n), stage in itertools.product(grid, ("ee", "oe")):
+        rec = store.data.get(key_of(p, setting, recorded, n, stage))
+        if rec is None:
+            continue
         iv = rec["interval"]
         err = None if rec["exponent"] is None else rec["exponent"] - p
         rows.append([p, setting.replace("_", ", ").replace("pct", " %"),

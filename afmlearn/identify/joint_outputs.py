@@ -43,7 +43,7 @@ def joint_model(res: JointResult, coef: FloatArray, library: AFMLibrary, a0: flo
         amp = float(coef[2])
         quad = float(coef[3 + k])
         phase = float(pb.rotations[0]) + math.atan2(quad, amp)
-        amp = math.hypot(amp, quad)
+        amp = math.hypot(amp, quad) * float(pb.drive_ratios[0])
     else:
         j = n_lin - 2 * int((~pb.rotated).sum())
         amp = math.hypot(coef[j], coef[j + 1])

@@ -55,6 +55,9 @@ __all__ = ["MeasuredHarmonics", "OutputErrorFit", "OutputErrorLaw", "OutputError
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
 
+#: starts of a fixed-exponent fit: ``(law, u, p) -> [u0, ...]``
+Restarts = Callable[["OutputErrorLaw", NDArray[np.float64], float], list[NDArray[np.float64]]]
+
 #: a residual returned for a parameter vector whose orbit cannot be found (a barrier)
 _FAIL = 1e4
 
@@ -271,8 +274,10 @@ class OutputErrorResult:
             for k, i in enumerate(np.flatnonzero(rot)):
                 out[N_LEVER + 1 + k] = B * math.sin(float(self.phases[i] - problem.rotations[i]))
         j = problem.n_lin - 2 * int((~rot).sum())
+        ratios = problem.drive_ratios
         for i in np.flatnonzero(~rot):
-            out[j], out[j + 1] = B * math.cos(self.phases[i]), B * math.sin(self.phases[i])
+            b_i = B * float(ratios[i])
+            out[j], out[j + 1] = b_i * math.cos(self.phases[i]), b_i * math.sin(self.phases[i])
             j += 2
         out[problem.n_lin:] = self.u[self.law.n_head:]
         return out
@@ -334,13 +339,15 @@ class _Objective:
         K, D, B, a0 = (float(v) for v in u[:4])
         law = self.law.encoded(u)
         nh = meas.n_harmonics
+        ratios = pb.drive_ratios
         res = []
         ok = True
         for i, o in enumerate(pb.observations):
             # an observation whose orbit was never found yet may settle onto it first
             settle = 0 if self.found[i] else min(int(9.0 / (math.pi * max(D, 1e-6))), 3000)
             xs, s, J, conv = periodic_orbit(self.states[i], n_out=self.n_out,
-                                            substeps=self.substeps, gap=o.gap, K=K, D=D, B=B,
+                                            substeps=self.substeps, gap=o.gap, K=K, D=D,
+                                            B=B * float(ratios[i]),
                                             omega=o.omega, law=law, a0=a0, jac=self.jacs[i],
                                             settle_periods=settle)
             if not conv or not np.all(np.isfinite(xs)):
@@ -424,7 +431,8 @@ def _start(problem: JointProblem, law: OutputErrorLaw, a0: float, coef: FloatArr
         B = float(np.hypot(coef[N_LEVER], coef[N_LEVER + 1]))
     else:
         j = n_lin - 2 * int((~rot).sum())
-        B = float(np.mean([np.hypot(coef[j + 2 * k], coef[j + 2 * k + 1])
+        r_free = problem.drive_ratios[~rot]
+        B = float(np.mean([np.hypot(coef[j + 2 * k], coef[j + 2 * k + 1]) / r_free[k]
                            for k in range(int((~rot).sum()))]))
     head = [-float(coef[1]), -float(coef[0]), B, float(a0)]
     if law.exponent_index is not None:
@@ -553,10 +561,18 @@ class OutputErrorProfile:
     step: float = 0.2
     max_points: int = 20
     max_nfev: int = 30
+    restart_nfev: int = 8
 
     def _walk(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
-              start: OutputErrorResult) -> dict[float, OutputErrorResult]:
-        """One law's profile: the grid ``low + k step`` from ``start``'s exponent outwards."""
+              start: OutputErrorResult, restarts: Restarts | None = None
+              ) -> dict[float, OutputErrorResult]:
+        """One law's profile: the grid ``low + k step`` from ``start``'s exponent outwards.
+
+        Every point starts from its neighbour's solution and, with ``restarts``, also from
+        each start ``restarts(law, u, p)`` (``restart_nfev`` evaluations each; the best one
+        is then converged): ``a0`` moves far along the exponent's valley, from one basin to
+        another, which a warm start alone does not follow (measured: profile points 5-8
+        chi2 above the fixed-exponent optimum, a jagged profile)."""
         ei = start.law.exponent_index
         assert ei is not None
         grid = np.round(np.arange(self.low, self.high + 1e-9, self.step), 6)
@@ -577,6 +593,19 @@ class OutputErrorProfile:
                 u0[4] = p
                 r, states = fit.solve(problem, meas, start.law, u0, fixed={4: float(p)},
                                       states=states, max_nfev=self.max_nfev)
+                if restarts is not None:
+                    alt = None
+                    for ua in restarts(start.law, prev.u, float(p)):
+                        ra, _ = fit.solve(problem, meas, start.law, ua, fixed={4: float(p)},
+                                          max_nfev=self.restart_nfev)
+                        if ra.converged and ra.chi2 < min(r.chi2, math.inf if alt is None
+                                                         else alt.chi2):
+                            alt = ra
+                    if alt is not None:
+                        ra, sa = fit.solve(problem, meas, start.law, alt.u,
+                                           fixed={4: float(p)}, max_nfev=self.max_nfev)
+                        if ra.converged and ra.chi2 < r.chi2:
+                            r, states = ra, sa
                 n += 1
                 pts[float(p)] = r
                 if math.isfinite(r.chi2):
@@ -587,7 +616,8 @@ class OutputErrorProfile:
 
     def run(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
             starts: list[OutputErrorResult],
-            points: dict[float, OutputErrorResult] | None = None
+            points: dict[float, OutputErrorResult] | None = None,
+            restarts: Restarts | None = None
             ) -> tuple[dict[str, Any], OutputErrorResult]:
         """The profile table and interval over the laws of ``starts`` (each with a contact
         exponent), and the best solution found.
@@ -600,7 +630,7 @@ class OutputErrorProfile:
         starts = [r for r in starts if r.law.exponent_index is not None]
         assert starts
         env: dict[float, tuple[float, OutputErrorResult]] = {}
-        walks = [self._walk(fit, problem, meas, st) for st in starts]
+        walks = [self._walk(fit, problem, meas, st, restarts) for st in starts]
         for pts in [*walks, dict(points or {})]:
             for p, r in pts.items():
                 p = round(float(p), 6)
@@ -753,6 +783,8 @@ class OutputErrorStage:
     onset_nfev: int = 25
     scan_exponents: tuple[float, ...] = (1.0, 1.5, 2.0, 2.5, 3.0)
     scan_nfev: int = 8
+    #: every profile point also starts from the ``n_onsets`` onsets (:meth:`_onset_starts`)
+    profile_restarts: bool = True
 
     def run(self, problem: JointProblem, library: AFMLibrary, a0: float, coef: FloatArray,
             exponent: float | None, extra: list[Any] | None = None,
@@ -789,7 +821,12 @@ class OutputErrorStage:
                        if set(r.law.library.names) != set(res.law.library.names))]
         expo = None
         if self.profile is not None and res.law.exponent_index is not None:
-            expo, res = self.profile.run(self.fit, problem, meas, laws, points)
+            restarts = None
+            if self.profile_restarts:
+                def restarts(law: OutputErrorLaw, u: FloatArray, p: float) -> list[FloatArray]:
+                    return self._onset_starts(problem, law, u, p, linear)
+            expo, res = self.profile.run(self.fit, problem, meas, laws, points,
+                                         restarts=restarts)
             assert res.law.exponent_index is not None
             expo["term_index"] = int(res.law.exponent_index)
             expo["cv_interval"] = (math.nan, math.nan)
@@ -812,25 +849,10 @@ class OutputErrorStage:
         With ``linear`` the coefficients of every start come from the equation-error fit at
         its ``(p, a0)``. Each scanned exponent's best fit, converged at that exponent, is
         stored in ``points`` (profile points)."""
-        lo, hi = problem.a0_range
-        zmin = problem.z_min()
-        h = law.n_head
-        d0 = max(float(u[3]) - zmin, 1e-6)
         best: OutputErrorResult | None = None
         for p in self.scan_exponents:
             best_p: OutputErrorResult | None = None
-            for a in np.geomspace(lo, hi, self.n_onsets + 2)[1:-1]:
-                u0 = u.copy()
-                u0[3], u0[4] = a, p
-                u0[h] = u[h] * d0 ** float(u[4]) / max(a - zmin, 1e-6) ** p
-                if linear is not None:
-                    # the coefficients coordinated with (p, a0) by the linear rows: the orbit
-                    # is so sensitive to the adhesion that an uncoordinated start falls into
-                    # another basin (measured: half the true z^-2 raised chi2 40-fold)
-                    c = np.asarray(linear(law.library_at(u0), float(a)), float)
-                    c = c[problem.n_lin:]
-                    if c.size == law.library.n_terms and np.all(np.isfinite(c)):
-                        u0[h:] = c
+            for u0 in self._onset_starts(problem, law, u, float(p), linear):
                 r, _ = self.fit.solve(problem, meas, law, u0, fixed={4: float(p)},
                                       max_nfev=self.scan_nfev)
                 if r.converged and (best_p is None or r.chi2 < best_p.chi2):
@@ -848,6 +870,35 @@ class OutputErrorStage:
             return None
         r, _ = self.fit.solve(problem, meas, law, best.u)
         return r if r.converged and r.chi2 <= best.chi2 else best
+
+    def _onset_starts(self, problem: JointProblem, law: OutputErrorLaw, u: FloatArray,
+                      p: float, linear: Callable[[AFMLibrary, float], FloatArray] | None
+                      ) -> list[FloatArray]:
+        """Starts of a fit at exponent ``p``: ``u`` with ``a0`` at each of the
+        ``n_onsets`` contact onsets, the contact coefficient rescaled to keep the force at the
+        deepest indentation and, with ``linear``, every force coefficient from the
+        equation-error fit at that ``(p, a0)``."""
+        ei = law.exponent_index
+        assert ei is not None
+        lo, hi = problem.a0_range
+        zmin = problem.z_min()
+        h = law.n_head
+        d0 = max(float(u[3]) - zmin, 1e-6)
+        out = []
+        for a in np.geomspace(lo, hi, self.n_onsets + 2)[1:-1]:
+            u0 = np.array(u, float)
+            u0[3], u0[4] = a, p
+            u0[h + ei] = u[h + ei] * d0 ** float(u[4]) / max(a - zmin, 1e-6) ** p
+            if linear is not None:
+                # the coefficients coordinated with (p, a0) by the linear rows: the orbit
+                # is so sensitive to the adhesion that an uncoordinated start falls into
+                # another basin (measured: half the true z^-2 raised chi2 40-fold)
+                c = np.asarray(linear(law.library_at(u0), float(a)), float)
+                c = c[problem.n_lin:]
+                if c.size == law.library.n_terms and np.all(np.isfinite(c)):
+                    u0[h:] = c
+            out.append(u0)
+        return out
 
     def _onsets(self, problem: JointProblem, meas: MeasuredHarmonics,
                 res: OutputErrorResult) -> OutputErrorResult:

@@ -52,6 +52,8 @@ FloatArray = NDArray[np.float64]
 
 #: the two lever columns shared by every observation
 N_LEVER = 2
+#: relative spread below which the observations' calibrated drives count as one drive
+DRIVE_RATIO_TOL = 1e-3
 
 
 @final
@@ -210,6 +212,22 @@ class JointProblem:
         return float(np.mean(v)) if v else None
 
     @property
+    def drive_ratios(self) -> FloatArray:
+        """Each observation's drive amplitude over the shared ``B`` (mean ``F_c``), (n_obs,).
+
+        Rows recorded at different free amplitudes (e.g. a set-point series at two drive
+        amplitudes, which reaches different indentations) share the law but not the drive:
+        observation ``i`` is driven by ``r_i B cos(Omega tau - phi_i)``. All ones when some
+        observation has no calibrated drive or the drives agree within ``DRIVE_RATIO_TOL``
+        (rows of one free amplitude: their calibrations differ by noise only).
+        """
+        v = [o.drive_amplitude for o in self.observations]
+        if any(a is None for a in v):
+            return np.ones(self.n_obs)
+        r = np.asarray(v, float) / float(np.mean(np.asarray(v, float)))
+        return r if float(np.max(np.abs(r - 1.0))) > DRIVE_RATIO_TOL else np.ones(self.n_obs)
+
+    @property
     def rotated(self) -> NDArray[np.bool_]:
         """Observations whose drive is rotated to a known phase, shape (n_obs,)."""
         return np.isfinite(self.rotations)
@@ -279,12 +297,15 @@ class JointProblem:
         rot = self.rotated
         j_free = N_LEVER + (1 + int(rot.sum()) if rot.any() else 0)
         j_q = N_LEVER + 1
+        ratios = self.drive_ratios
         for i, o in enumerate(self.observations):
             b = o.bound
             s = 1.0 / o.row_sigma
             lin = np.zeros((b.n_rows, n_lin))
             lin[:, :N_LEVER] = b.linear[:, :N_LEVER] * s
-            c, sn = b.linear[:, 2] * s, b.linear[:, 3] * s
+            # a rotated drive's columns carry the observation's drive ratio (shared B)
+            rs = s * float(ratios[i]) if rot[i] else s
+            c, sn = b.linear[:, 2] * rs, b.linear[:, 3] * rs
             if rot[i]:
                 phi = float(self.rotations[i])
                 cr, sr = math.cos(phi), math.sin(phi)

@@ -147,3 +147,29 @@ def test_exponent_line_without_cv_interval() -> None:
                                 "interaction_exponent_bounded": False,
                                 "interaction_exponent_cv_interval": cv})
         assert "1.00-3.90" in line and "NOT bounded" in line and "cross-validated" not in line
+
+
+def test_rows_at_two_free_amplitudes_share_the_law_not_the_drive(tmp_path: Path) -> None:
+    """A series at two free amplitudes (1.5 and 3 rest-gap units, i.e. other indentations):
+    each observation is driven by its own calibrated ``F_c`` (ratio 1 : 2), and the true law
+    with the shared drive scaled by those ratios fits every orbit to the noise (a shared,
+    unscaled drive would miss the high-amplitude rows by far)."""
+    rows = "scenario.gap_ratios=[0.8,0.6,0.4]"
+    low = Experiment.read(_series(tmp_path / "a15.h5", rows))
+    high = Experiment.read(_series(tmp_path / "a30.h5", rows,
+                                   "excitation.free_amplitude_ratio=3.0"))
+    pb = RecordedPhase().initial(_problem(Experiment([*low, *high])))
+    r = pb.drive_ratios
+    np.testing.assert_allclose(r[3:] / r[:3], 2.0, rtol=2e-3)
+    np.testing.assert_allclose(np.mean(r), 1.0)
+    # the deepest indentation grows with the free amplitude (what separates p from a0)
+    lib, c, a0 = _true_law(tmp_path / "a15.h5", pb.length_m)
+    z_min = [float(np.min(o.gap - o.denoised.x)) for o in pb.observations]
+    assert a0 - max(z_min[3:]) > 1.3 * (a0 - min(z_min[:3]))
+    ei = next(j for j, t in enumerate(lib.terms) if isinstance(t, Indentation))
+    law = OutputErrorLaw(library=lib, exponent_index=ei)
+    p_true = float(lib.terms[ei].p)
+    u = np.array([1.0, 1 / pb.quality_factor, pb.drive_amplitude, a0, p_true, *c])
+    fit = OutputErrorFit(n_harmonics=30, n_out=256)
+    res, _ = fit.solve(pb, fit.measure(pb), law, u, max_nfev=3)
+    assert res.converged and res.chi2 / res.dof < 1.3, (res.chi2, res.dof)
