@@ -106,8 +106,9 @@ class GroupFitter:
         Slow-flow time step (dimensionless).
     start : dict or None
         A previous joint fit's :attr:`values_` (``law`` fields in the group unit, ``curves``:
-        one dict of nuisances per curve). None: each curve's baseline is fitted alone
-        (:class:`CurveFitter`) and every one of those laws is tried on the whole group.
+        one dict of nuisances per curve). None (and no ``extra_starts``): each curve's baseline
+        is fitted alone (:class:`CurveFitter`) and every one of those laws is tried on the
+        whole group.
     extra_starts : sequence of dict
         Further starts in the form of :attr:`values_` (e.g. single-curve fits of the same
         hypothesis), scored with the others.
@@ -119,13 +120,14 @@ class GroupFitter:
         Cap on curve evaluations (one forward model of one curve each). None: no cap.
     fixed_law : (CurveLaw, float) or None
         A law and its length unit [m] held fixed: only the nuisances are fitted (predicting
-        curves not used to fit the law); their start is a scan of the surface position.
+        curves not used to fit the law); their start is a scan of the surface positions.
 
     Attributes
     ----------
     values_ : dict
         ``law``: shared fitted fields (group unit); ``curves``: per-curve ``offset``,
-        ``omega`` (and ``drift``).
+        ``omega`` (and ``drift``); ``length_m``: the group unit [m] (a start in another unit,
+        e.g. of a subset of the curves, is rescaled to the same SI law).
     law_ : CurveLaw
         The shared law in the group unit (lengths / :attr:`length_m_`).
     length_m_ : float
@@ -249,6 +251,12 @@ class GroupFitter:
             if self._drift is not None:
                 x.append(cv.get(DRIFT, self._drift.init))
         law = values["law"]
+        unit = values.get("length_m")
+        if law and unit is not None and abs(unit / self.length_m_ - 1.0) > 1e-12:
+            # a start in another length unit (another set of curves): the same SI law here
+            own = CurveLaw(a0=self.a0_m / unit, radius=self.tip_radius_m / unit).replace(**law)
+            own = rescale_law(own, unit / self.length_m_)
+            law = {k: getattr(own, k) for k in law}
         x += [_enc(p, law.get(p.field, self._default(p))) for p in self._shared]
         return np.clip(np.array(x, dtype=float), self._lo + 1e-9, self._hi - 1e-9)
 
@@ -350,10 +358,17 @@ class GroupFitter:
         cands: list[NDArray[np.float64]] = []
         if self.fixed_law is not None:
             return self._offset_scan()
-        if self.start is None:
-            cands += self._single_starts()
-        else:
+        if self.start is not None:
             cands += self._rescaled(self._encode(self.start))
+        elif not self.extra_starts:
+            cands += self._single_starts()
+        left = self._remaining()
+        n = len(self._curves)
+        if left is not None and len(cands) > 1 and len(cands) * n > left // 3:
+            # at most a third of the budget on scoring starts: every k-th (the first, the
+            # start itself, always)
+            k = math.ceil(len(cands) * n / max(1, left // 3))
+            cands = cands[::k]
         cands += [self._encode(s) for s in self.extra_starts]
         if len(cands) == 1:
             return cands
@@ -365,24 +380,27 @@ class GroupFitter:
         return [cands[k] for _, k in costs[: self.n_starts]]
 
     def _offset_scan(self) -> list[NDArray[np.float64]]:
-        """Fixed law: the surface positions of every curve scanned together around their
-        guesses (-0.5 ... 0.5 free amplitudes), each curve keeping its best."""
+        """Fixed law: each curve's surface position scanned around its guess, coarse
+        (-0.3 ... 0.3 free amplitudes, step 0.02) then fine (step 0.004) around the best:
+        whether the tip reaches the contact turns on a fraction of a nanometre."""
         n = len(self._curves)
         k = self._n_nuis
         x = self._encode({"law": {}, "curves": [{} for _ in range(n)]})
-        best = [(math.inf, 0.0)] * n
-        for d in np.linspace(-0.5, 0.5, 11):
-            y = x.copy()
-            y[0:k * n:k] = x[0:k * n:k] + d
-            v = self._decode(y)
+        for grid in (np.linspace(-0.3, 0.3, 31), np.linspace(-0.02, 0.02, 11)):
+            best = [(math.inf, float(x[k * i])) for i in range(n)]
+            base = x.copy()
+            for d in grid:
+                y = base.copy()
+                y[0:k * n:k] = base[0:k * n:k] + d
+                v = self._decode(y)
+                for i in range(n):
+                    try:
+                        r = self._residual_one(i, v)
+                    except _Budget:
+                        break
+                    best[i] = min(best[i], (float(r @ r), float(y[k * i])))
             for i in range(n):
-                try:
-                    r = self._residual_one(i, v)
-                except _Budget:
-                    break
-                best[i] = min(best[i], (float(r @ r), float(y[k * i])))
-        for i in range(n):
-            x[k * i] = best[i][1] if math.isfinite(best[i][0]) else x[k * i]
+                x[k * i] = best[i][1]
         return [np.clip(x, self._lo + 1e-9, self._hi - 1e-9)]
 
     def _single_starts(self) -> list[NDArray[np.float64]]:
@@ -434,16 +452,11 @@ class GroupFitter:
                 out.append(np.clip(z, self._lo + 1e-9, self._hi - 1e-9))
         if not any(np.allclose(z, x) for z in out):
             out.insert(0, x)
-        if extra:  # the hypothesis' terms at their lower bounds: next to the start itself
-            z = x.copy()
-            for p in extra:
-                z[idx[p.field]] = _enc(p, p.low) if p.log else x[idx[p.field]]
-            out.append(np.clip(z, self._lo + 1e-9, self._hi - 1e-9))
         return out
 
     def _set(self, x: NDArray[np.float64]) -> None:
         self.x_ = x
-        self.values_ = self._decode(x)
+        self.values_ = {**self._decode(x), "length_m": self.length_m_}
         self.law_ = self._base.replace(**self.values_["law"])
         self._unlimited = True  # the final residual is always computed
         parts = self._parts(x)

@@ -9,7 +9,8 @@ solution without its terms (as :class:`CurveDiagnoser` does). The gain is measur
 fitted: leave-one-curve-out -- the law is refitted on the other N - 1 curves (from the joint
 solution), the left-out curve's nuisances (surface position, drive frequency, drift) are fitted
 on its approach with the law held fixed, and the whole left-out curve (approach and
-retraction) is scored; ``gain = 1 - mean(nrmse_ext) / mean(nrmse_base)`` over the N folds.
+retraction) is scored; ``gain`` is the median over the N folds of ``1 - nrmse_ext / nrmse_base``
+(one fold whose refit failed does not decide).
 Leaving out is done for the candidates that can be named (evidence above the threshold; the
 others get the retraction gain of the joint fit, which cannot change the named cause). The
 decision rule is the single-curve one (:func:`afmlearn.curves.diagnose.name_cause`).
@@ -27,11 +28,13 @@ import numpy as np
 from simulator.lockin import LockIn
 
 from .curve import Curve
-from .diagnose import equation, heldout_nrmse, name_cause
-from .group import GroupFitter
+from .diagnose import CurveDiagnoser, equation, heldout_nrmse, name_cause
+from .fit import OFFSET, OMEGA
+from .group import GroupFitter, group_length
 from .hypotheses import DRIFT, EXTENSIONS, Hypothesis
+from .transfer import rescale_law
 
-__all__ = ["GroupDiagnoser", "curve_nrmse"]
+__all__ = ["GroupDiagnoser", "curve_nrmse", "starts_from_singles"]
 
 log = logging.getLogger(__name__)
 
@@ -56,8 +59,8 @@ class GroupDiagnoser:
         Slow-flow time step (dimensionless).
     max_evaluations : int or None
         Cap on curve evaluations of the whole diagnosis: the baseline up to a third, the
-        extensions share up to half of the whole, the rest is for the refit of a stuck baseline
-        and the leave-one-out folds. None: no cap.
+        extensions share up to 60 % of the whole (75 % with the refit of a stuck baseline and
+        its second round), the rest is shared by the leave-one-out folds. None: no cap.
     leave_one_out : bool
         Measure the gain on left-out curves (needs N >= 2); False: the joint fit's retraction.
 
@@ -128,12 +131,12 @@ class GroupDiagnoser:
         log.info("group of %d curves: baseline", len(curves))
         self.baseline_ = GroupFitter(max_nfev=max(self.max_nfev, 20),
                                      extra_starts=extra.get("none", ()),
-                                     max_evaluations=self._cap(1 / 3), **opts).fit(curves)
+                                     max_evaluations=self._cap(0.2), **opts).fit(curves)
         self._spent += self.baseline_.n_evaluations_
         self.fits_: dict[str, GroupFitter] = {}
         for round_ in range(2):
             for i, h in enumerate(self.hypotheses):
-                cap = self._cap(0.5 if round_ == 0 else 0.7)
+                cap = self._cap(0.6 if round_ == 0 else 0.75)
                 share = None if cap is None else max(1, cap // (len(self.hypotheses) - i))
                 f = GroupFitter(hypothesis=h, start=self.baseline_.values_,
                                 extra_starts=extra.get(h.cause, ()) if round_ == 0 else (),
@@ -152,10 +155,11 @@ class GroupDiagnoser:
                 break
             own = {p.field for p in best.hypothesis.parameters}
             start = {"law": {k: v for k, v in best.values_["law"].items() if k not in own},
+                     "length_m": best.length_m_,
                      "curves": [{k: v for k, v in c.items() if k not in own}
                                 for c in best.values_["curves"]]}
             rebase = GroupFitter(start=start, rescales=((1.0, 1.0),), max_nfev=self.max_nfev,
-                                 max_evaluations=self._cap(0.55), **opts).fit(curves)
+                                 max_evaluations=self._cap(0.65), **opts).fit(curves)
             self._spent += rebase.n_evaluations_
             if rebase.chi2_ >= self.baseline_.chi2_ * (1.0 - 1e-4):
                 break
@@ -180,12 +184,19 @@ class GroupDiagnoser:
         if self.leave_one_out and len(curves) >= 2:
             todo = [c for c in cands if c["evidence"] > self.threshold]
             if todo:
+                if self.max_evaluations is not None:
+                    # what is left, per fold and law (a refit and a prediction each)
+                    self._fold_cap = max(10 * len(curves), (self.max_evaluations - self._spent)
+                                         // (2 * len(curves) * (1 + len(todo))))
                 self.loo_["none"] = self._loo(b, None)
-                base_loo = float(np.mean(self.loo_["none"]))
+                base_loo = np.array(self.loo_["none"])
                 for c in todo:
                     h = next(h for h in self.hypotheses if h.cause == c["cause"])
                     self.loo_[h.cause] = self._loo(self.fits_[h.cause], h)
-                    c["gain_loo"] = 1.0 - float(np.mean(self.loo_[h.cause])) / base_loo
+                    # the median over the folds: one fold whose refit failed (either law)
+                    # does not decide
+                    c["gain_loo"] = float(np.median(1.0 - np.array(self.loo_[h.cause])
+                                                    / np.maximum(base_loo, 1e-300)))
                     log.info("group %s: leave-one-out gain %.3f", h.cause, c["gain_loo"])
         for c in cands:
             c["gain"] = c["gain_loo"] if c["gain_loo"] is not None else c["gain_retraction"]
@@ -204,10 +215,9 @@ class GroupDiagnoser:
         n = len(curves)
         for i in range(n):
             keep = [j for j in range(n) if j != i]
-            start = {"law": full.values_["law"],
+            start = {"law": full.values_["law"], "length_m": full.length_m_,
                      "curves": [full.values_["curves"][j] for j in keep]}
-            cap = None if self.max_evaluations is None else max(
-                n * 10, self.max_evaluations // (8 * n))
+            cap = None if self.max_evaluations is None else self._fold_cap
             fit = GroupFitter(hypothesis=hypothesis, start=start, rescales=((1.0, 1.0),),
                               max_nfev=self.max_nfev, max_evaluations=cap,
                               **self._opts([lk[j] for j in keep])).fit([curves[j]
@@ -220,6 +230,8 @@ class GroupDiagnoser:
                                **self._opts([lk[i]])).fit([curves[i]])
             self._spent += pred.n_evaluations_
             out.append(curve_nrmse(pred, 0))
+            log.info("left out curve %d (%s): whole-curve NRMSE %.4g", i,
+                     hypothesis.cause if hypothesis else "baseline", out[-1])
         return out
 
     @property
@@ -269,6 +281,28 @@ class GroupDiagnoser:
                       "n_evaluations": self.n_evaluations_, "curves": per_curve},
             "figures": [],
         }
+
+
+def starts_from_singles(diagnosers: Sequence[CurveDiagnoser]) -> dict[str, list[dict]]:
+    """Joint starts from single-curve diagnoses of the same curves (``extra_starts`` of
+    :meth:`GroupDiagnoser.fit`): per cause, each curve's fitted law rescaled to the group
+    unit, with every curve's own fitted nuisances of that cause."""
+    curves = [d.curve_ for d in diagnosers]
+    length = group_length(curves)
+    out: dict[str, list[dict]] = {}
+    causes = ["none"] + [c for c in diagnosers[0].fits_ if all(c in d.fits_ for d in diagnosers)]
+    for cause in causes:
+        fits = [d.baseline_ if cause == "none" else d.fits_[cause] for d in diagnosers]
+        nuis = [{k: v for k, v in f.values_.items() if k in (OFFSET, OMEGA, DRIFT)}
+                for f in fits]
+        starts = []
+        for f, c in zip(fits, curves, strict=True):
+            law = rescale_law(f.law_, c.length_m / length)
+            starts.append({"law": {k: getattr(law, k) for k in f.values_
+                                   if k not in (OFFSET, OMEGA, DRIFT)}, "curves": nuis,
+                           "length_m": length})
+        out[cause] = starts
+    return out
 
 
 def _at(values: list[float] | None, i: int) -> float | None:
