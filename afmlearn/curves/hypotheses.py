@@ -51,9 +51,9 @@ EXTENSIONS: tuple[Hypothesis, ...] = (
     Hypothesis("contact_geometry", (Parameter("exponent", 2.0, 1.0, 3.5, log=False,
                                               alternatives=(1.2, 2.5)),)),
     Hypothesis("viscoelastic", (Parameter("visco", 0.05, 1e-5, 1e3,
-                                          alternatives=(0.005, 0.5)),)),
+                                          alternatives=(0.0005, 0.005, 0.5)),)),
     Hypothesis("long_range_damping", (Parameter("damping", 1e-3, 1e-7, 1e1,
-                                                alternatives=(1e-2,)),
+                                                alternatives=(1e-4, 1e-2)),
                                       # up to 100 free amplitudes: squeeze-film damping
                                       # reaches microns
                                       Parameter("decay_length", 0.1, 1e-3, 100.0,
@@ -64,5 +64,7 @@ EXTENSIONS: tuple[Hypothesis, ...] = (
                                            alternatives=(1e-3, 1e-2)),)),
     Hypothesis("adhesion_hysteresis", (Parameter("neck", 0.01, 1e-5, 0.5,
                                                  alternatives=(0.003, 0.03)),)),
-    Hypothesis(DRIFT, (Parameter(DRIFT, 0.0, -1e-4, 1e-4, log=False),)),
+    # 1e-6 per unit time: ~0.05 free amplitudes over a 2000-period ramp
+    Hypothesis(DRIFT, (Parameter(DRIFT, 0.0, -1e-4, 1e-4, log=False,
+                                 alternatives=(-2e-6, 2e-6)),)),
 )
