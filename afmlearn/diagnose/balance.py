@@ -168,10 +168,15 @@ def bounded_lstsq(A: FloatArray, b: FloatArray, P: FloatArray, t: FloatArray, lo
     -------
     coef : ndarray, shape (p,)
     residual : ndarray, shape (m + k,)
-        ``[A; P] coef - [b; t]``.
+        ``[A; P] coef - [b; t]``; all ``inf`` (coef NaN) when the rows are not finite (a
+        structure with no finite columns on this orbit: the caller rejects it).
     """
     Af = np.vstack([A, P])
     bf = np.concatenate([b, t])
+    if not (np.all(np.isfinite(Af)) and np.all(np.isfinite(bf))):
+        # measured: a non-finite column made LAPACK raise "SVD did not converge" from inside
+        # a one-orbit diagnosis (step 2 after a detector map)
+        return np.full(Af.shape[1], np.nan), np.full(bf.size, np.inf)
     scale = np.linalg.norm(Af, axis=0)
     scale[scale == 0] = 1.0
     res = lsq_linear(Af / scale, bf, bounds=(lo * scale, hi * scale), method="bvls",

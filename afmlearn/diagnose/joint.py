@@ -50,6 +50,9 @@ class JointBalance:
         assert len(balances) == len(phase_priors) and len(balances) > 0
         self.balances = list(balances)
         self.phase_priors = list(phase_priors)
+        #: structures rejected so far because their columns were not finite on the orbits
+        #: (:func:`~afmlearn.diagnose.balance.bounded_lstsq`; chi2 inf)
+        self.n_rejected = 0
 
     @property
     def n_obs(self) -> int:
@@ -93,6 +96,8 @@ class JointBalance:
         b = np.concatenate([bb for _, bb in blocks])
         lo, hi = self.bounds(spec)
         coef, r = bounded_lstsq(A, b, *self.balances[0].prior_rows(A.shape[1]), lo, hi)
+        if not np.all(np.isfinite(r)):
+            self.n_rejected += 1
         r = np.concatenate([r, self.phase_residual(phases)])
         return Solution(spec=spec, coef=coef, residual=r, chi2=float(r @ r),
                         values=tuple(values), phases=tuple(float(x) for x in phases))

@@ -194,6 +194,21 @@ class OutputError:
         #: settle runs (instead of shooting) still allowed in the current refinement
         self._settle_budget = 0
 
+    def snapshot(self) -> tuple[dict, dict, list[float]]:
+        """The shooting warm starts, monodromy estimates and phases, to :meth:`restore`."""
+        return (dict(self._warm), {k: v.copy() for k, v in self._jac.items()},
+                list(self._phases))
+
+    def restore(self, state: tuple[dict, dict, list[float]]) -> None:
+        """Warm starts of a :meth:`snapshot`: a model's periodic orbit is then shot from the
+        orbits of the fit that took the snapshot. Where two stable orbits coexist at a
+        set-point (attractive and tapping branches) the start decides the branch, so a fit's
+        held-out refits must start from its own orbits, not from whatever was fitted last."""
+        warm, jac, phases = state
+        self._warm = dict(warm)
+        self._jac = {k: v.copy() for k, v in jac.items()}
+        self._phases = list(phases)
+
     def subset(self, indices: Sequence[int]) -> OutputError:
         """The output error of some observations (held-out folds), warm starts kept."""
         oe = OutputError(self.jb.subset(indices), self.scales, n_out=self.n_out)

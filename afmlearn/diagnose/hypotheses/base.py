@@ -61,6 +61,9 @@ class Context:
         Measured ``f_i / f0`` from the file (empty when unknown).
     free_detector : (float, float) or None
         ``(b2, b3)`` estimated from the harmonics of the free trace, when there is one.
+    a0_max : float or None
+        Largest contact onset ``a0`` / L_ref any fit may reach (None: only the factor box
+        around the model extended, ``a0_factor``).
     """
 
     length_m: float
@@ -70,6 +73,7 @@ class Context:
     tip_radius: float
     higher_mode_ratios: tuple[float, ...] = ()
     free_detector: tuple[float, float] | None = None
+    a0_max: float | None = None
 
 
 class Probe(Protocol):
@@ -103,6 +107,11 @@ class AbstractHypothesis(abc.ABC):
     #: joint fits add one start per factor with ``a0`` held there and rank the starts by output
     #: error; the sphere baseline absorbs a 4 V bias with ``a0`` 8x too large)
     a0_grid: ClassVar[tuple[float, ...]] = (1.0,)
+    #: joint fits: how many of the grid's best points by equation error (one per value of the
+    #: first parameter) are also scored by output error on the current model's point, the
+    #: best becoming the start when it beats the equation-error start (``fit.scan_starts``;
+    #: 0: none)
+    output_error_scan: ClassVar[int] = 0
 
     @abc.abstractmethod
     def parameters(self, ctx: Context) -> list[Parameter]:

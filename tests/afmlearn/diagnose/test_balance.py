@@ -11,6 +11,7 @@ from afmlearn.diagnose.balance import (
     HarmonicBalance,
     PeriodicOrbit,
     Solution,
+    bounded_lstsq,
     from_real,
     harmonics,
     invert_detector,
@@ -37,6 +38,23 @@ def test_harmonics_roundtrip_and_derivative():
     assert np.allclose(synthesize(U, m, 1, omega=2.0), du)
     r = to_real(U)
     assert np.allclose(from_real(r), U)
+
+
+def test_bounded_lstsq_known_answer_and_non_finite_rows_rejected():
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(40, 3))
+    c = np.array([1.0, -0.5, 2.0])
+    P, t = np.zeros((1, 3)), np.zeros(1)
+    lo, hi = np.full(3, -np.inf), np.array([np.inf, 0.0, np.inf])
+    coef, r = bounded_lstsq(A, A @ c, P, t, lo, hi)
+    assert np.allclose(coef, c) and np.allclose(r, 0.0, atol=1e-9)
+    # the bound is active: -0.5 is allowed, +0.5 is clipped to 0
+    coef, _ = bounded_lstsq(A, A @ np.array([1.0, 0.5, 2.0]), P, t, lo, hi)
+    assert coef[1] == pytest.approx(0.0, abs=1e-12)
+    # a non-finite column (LAPACK raised "SVD did not converge") is a rejected structure
+    A[5, 1] = np.inf
+    coef, r = bounded_lstsq(A, A @ c, P, t, lo, hi)
+    assert np.all(np.isnan(coef)) and np.all(np.isinf(r)) and r.size == 41
 
 
 def test_detector_inverse():

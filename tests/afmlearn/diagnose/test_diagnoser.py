@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from afmlearn.diagnose import Diagnoser, NullCalibration
-from afmlearn.diagnose.diagnoser import name_cause
+from afmlearn.diagnose.diagnoser import name_cause, tie_margin
 from afmlearn.diagnose.hypotheses import (
     ContactGeometry,
     DetectorNonlinearity,
@@ -60,6 +60,19 @@ def test_name_cause_rule():
     assert idx == 1                     # the threshold penalises the flexible extension
     idx, conf = name_cause([5.0, 30.0], [0.5, 0.01], [10.0, 10.0], 0.05)
     assert idx is None and conf > 0.5
+
+
+def test_name_cause_tie_goes_to_the_heldout_setpoints():
+    # set-point series: equal fits (within the tie margin) are decided by the held-out
+    # NRMSE of the set-points never fitted; outside the margin the evidence decides
+    d, g, t = [25.4, 26.2, 22.1], [0.80, 0.85, 0.84], [7.24, 9.88, 9.88]
+    assert name_cause(d, g, t, 0.05)[0] == 0
+    assert name_cause(d, g, t, 0.05, heldout=[0.0016, 0.0010, 0.0012])[0] == 1
+    assert name_cause(d, g, t, 0.05, heldout=[0.0016, np.nan, np.nan])[0] == 0
+    far = [25.4 + tie_margin(25.4) + 3.0, 26.2, 22.1]
+    assert name_cause(far, g, t, 0.05, heldout=[0.0016, 0.0010, 0.0012])[0] == 0
+    # a tied candidate without held-out gain is no alternative
+    assert name_cause(d, [0.8, 0.01, 0.84], t, 0.05, heldout=[0.0016, 0.0010, 0.0012])[0] == 2
 
 
 @pytest.mark.parametrize("kwargs, match", [
