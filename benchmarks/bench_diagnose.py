@@ -34,6 +34,7 @@ import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import final  # noqa: E402
 
 import numpy as np  # noqa: E402
 from _common import ROOT, add_doc_flag, fmt, machine_info, md_table, write_section  # noqa: E402
@@ -366,12 +367,12 @@ def _commits(recs: list[dict]) -> str:
 
 def series_section(records: list[dict], variants: list[tuple[int, bool]],
                    visibility: dict[tuple, dict] | None = None,
-                   thresholds: dict[str, float] | None = None) -> str:
+                   oracle: dict[tuple, dict] | None = None) -> str:
     """Side-by-side tables (same draws): per cause and variant the share named right, with
     how many draws and which commits each cell rests on; the confusion matrix of the first
     variant; null series with a one-sided 95 % bound; time; the oracle's visible share."""
     causes = list(CAUSES)
-    visibility = visibility or {}
+    visibility, oracle = visibility or {}, oracle or {}
     if not records:
         return "No records yet."
     out = [f"Hidden-effect set-point series (`afmlearn.diagnose.synthetic.hidden_series`): "
@@ -473,31 +474,42 @@ def series_section(records: list[dict], variants: list[tuple[int, bool]],
                                      "one-sided 95 % upper bound", "diagnosis time median [s]",
                                      "max [s]", "CPU time median / max [s]",
                                      "1-min load median (range)"], t_rows))
-        # oracle: visible draws vs found (8 pts, phase)
-        if visibility and thresholds:
+        # oracle: visible draws vs found (8 pts, phase, one-effect draws)
+        if oracle or visibility:
             v_rows = []
             for c in causes[1:]:
-                rs = [r for r in by[main] if c in r["cause"].split("+")]
-                vis = [r for r in rs if visibility.get(_draw_key(r), {}).get(c, {})
-                       .get("chi2_total", 0.0) > thresholds.get(c, np.inf)]
-                known = [r for r in rs if _draw_key(r) in visibility]
-                if not known:
+                rs = [r for r in by[main] if r["cause"] == c]
+                orc = [(r, oracle[_draw_key(r)]) for r in rs
+                       if _draw_key(r) in oracle and "error" not in oracle[_draw_key(r)]]
+                twin = [visibility[_draw_key(r)][c]["chi2_total"] for r in rs
+                        if _draw_key(r) in visibility]
+                if not orc and not twin:
                     continue
-                found_vis = sum(c in _found(r) for r in vis)
-                found_all = sum(c in _found(r) for r in known)
-                med = np.median([visibility[_draw_key(r)][c]["chi2_total"] for r in known])
-                v_rows.append([c, str(len(known)), f"{len(vis)}", f"{found_vis}/{len(vis)}",
-                               f"{found_all - found_vis}/{len(known) - len(vis)}",
-                               fmt(float(med), 2)])
+                vis = [r for r, o in orc if o["delta_chi2"] > o["threshold"]]
+                inv = [r for r, o in orc if o["delta_chi2"] <= o["threshold"]]
+                v_rows.append([
+                    c, str(len(rs)),
+                    f"{len(vis)}/{len(orc)}" if orc else "not computed",
+                    f"{sum(_hit(r) for r in vis)}/{len(vis)}" if orc else "-",
+                    f"{sum(_hit(r) for r in inv)}/{len(inv)}" if orc else "-",
+                    fmt(float(np.median([o["delta_chi2"] for _, o in orc])), 2) if orc else "-",
+                    _commits([o for _, o in orc]) if orc else "-",
+                    fmt(float(np.median(twin)), 2) if twin else "-"])
             if v_rows:
-                out.append(f"\nVisible draws ({vname[main]}): the oracle "
-                           f"(`synthetic.effect_visibility`, truth vs its effect-free twin at "
-                           f"the drawn parameters, harmonics 0-30 in noise units) above the "
-                           f"cause's threshold. It bounds any drop from above (the baseline "
-                           f"refits), so `visible` is necessary, not sufficient.\n\n"
-                           + md_table(["cause (in one- or two-effect draws)", "draws",
-                                       "visible", "found / visible", "found / not visible",
-                                       "median oracle chi2"], v_rows))
+                out.append(f"\nIs the effect visible? ({vname[main]}, one-effect draws.) "
+                           f"Oracle: the true law's chi2 drop, i.e. the cause's extension "
+                           f"with its shape parameter pinned at the drawn value and every "
+                           f"other parameter refitted (`--oracle`; exponent, electrostatic "
+                           f"radius, neck length, decay length); visible = drop above the "
+                           f"cause's threshold. Twin bound: the noise-free orbit against its "
+                           f"effect-free twin at the drawn parameters "
+                           f"(`synthetic.effect_visibility`, harmonics 0-30 in noise units); "
+                           f"the baseline refits its parameters, so this bound is far above "
+                           f"any drop and only rules out a vanishing effect.\n\n"
+                           + md_table(["cause", "draws", "visible (true-law drop > "
+                                       "threshold)", "named / visible",
+                                       "named / not visible", "median true-law drop",
+                                       "oracle commits", "median twin bound"], v_rows))
         errors = [f"{r['cause']} #{r['index']} ({vname[v]}): {r['error']}" for v in vs
                   for r in by[v] if "error" in r]
         if errors:
@@ -524,6 +536,86 @@ def series_section(records: list[dict], variants: list[tuple[int, bool]],
                        "\n\n" + md_table(["variant", "median abs(p - p_true)", "within 0.1",
                                            "median 95 % interval width"], ex_rows))
     return "\n".join(out)
+
+
+#: causes whose extension has a nonlinear shape parameter the oracle can pin at the truth
+ORACLE_CAUSES = ("contact_geometry", "electrostatic", "adhesion_hysteresis",
+                 "long_range_damping")
+
+
+def _truth_value(case: dict, cause: str) -> tuple[float, bool]:
+    """The drawn value of the cause's nonlinear parameter (and whether it is a length)."""
+    e = case["effects"][cause]
+    if cause == "contact_geometry":
+        return e["exponent"], False
+    if cause == "electrostatic":
+        return case["tip_radius_m"], True
+    if cause == "long_range_damping":
+        return e["decay_length_m"], True
+    # JKR neck length of the simulator's hysteretic law: 3/4 c s, c = sqrt(2 pi w / E*),
+    # s = (c R / 4)^(1/3)
+    c = math.sqrt(2 * math.pi * e["work_of_adhesion_j_per_m2"] / case["reduced_modulus_pa"])
+    return 0.75 * c * (c * case["tip_radius_m"] / 4) ** (1 / 3), True
+
+
+def _pinned(cause: str, value: float, is_length: bool):
+    """The cause's hypothesis with its nonlinear parameter held at ``value`` (SI)."""
+    from afmlearn.diagnose import hypotheses as hyp
+    from afmlearn.diagnose.hypotheses.base import AbstractHypothesis, Parameter
+
+    inner = {h.cause: h for h in (hyp.ContactGeometry(), hyp.Electrostatic(),
+                                  hyp.AdhesionHysteresis(), hyp.LongRangeDamping())}[cause]
+
+    @final
+    class Pinned(AbstractHypothesis):
+        """``inner`` with its one nonlinear parameter fixed (linear terms still fitted)."""
+
+        def __init__(self) -> None:
+            self.cause = inner.cause
+            self.a0_factor, self.a0_grid = inner.a0_factor, inner.a0_grid
+
+        def parameters(self, ctx):
+            v = value / ctx.length_m if is_length else value
+            p = inner.parameters(ctx)[0]
+            return [Parameter(p.name, v * (1 - 1e-4), v * (1 + 1e-4), (v,), log=True,
+                              nested=p.nested)]
+
+        def extend(self, spec, values):
+            return inner.extend(spec, values)
+
+        def nested_values(self, params):
+            return [params[0].grid[0]]
+
+    return Pinned()
+
+
+def _oracle_job(job: dict) -> dict:
+    """The true law's chi2 drop on one draw: the cause's extension with its nonlinear
+    parameter pinned at the drawn value, everything else refitted (investigation: it reads
+    the truth from the record, which the diagnosis under test never sees)."""
+    path, case = _series_file(job, Path(job["files"]))
+    exp = Experiment.read(path)
+    t0 = time.perf_counter()
+    h = _pinned(job["cause"], *_truth_value(case, job["cause"]))
+    try:
+        d = Diagnoser(hypotheses=[h], max_causes=1, screen_chi2=0.0).fit(exp)
+        c = d.candidates_[0]
+        out = {"delta_chi2": float(c.delta_chi2), "threshold": float(c.threshold),
+               "gain": float(c.gain)}
+    except Exception as err:  # noqa: BLE001 -- an oracle failure is reported, not fatal
+        out = {"error": f"{type(err).__name__}: {err}"}
+    return {**job, **out, "t": time.perf_counter() - t0, "commit": code_version()}
+
+
+def oracle_pass(records: list[dict], path: Path) -> dict[tuple, dict]:
+    """:func:`_oracle_job` on every one-effect 8-point draw of :data:`ORACLE_CAUSES` in
+    ``records`` (resumable, one JSON line per draw in ``path``)."""
+    jobs = [{k: r[k] for k in ("set_id", "spp", "noise", "cause", "index", "seed", "periods",
+                               "files")} for r in records
+            if r["cause"] in ORACLE_CAUSES and r["n_points"] == 8 and r["phase"]]
+    jobs = list({_draw_key(j): j for j in jobs}.values())
+    recs = run_jobs(jobs, path, 1, job=_oracle_job, key=_draw_key, desc="oracle")
+    return {_draw_key(r): r for r in recs}
 
 
 def _draw_key(r: dict) -> tuple:
@@ -618,7 +710,7 @@ def null_table(nulls: list[dict]) -> str:
                      "largest drop / threshold: median", "max", "raised", "commits"], rows)
 
 
-def _latest(path: Path, since: str = "") -> list[dict]:
+def _latest(path: Path, since: str = "", key=None) -> list[dict]:
     """The last record of each key in a JSON-lines file (taken on ``since`` or later)."""
     accept = _since(since) if since else (lambda r: True)
     last: dict[tuple, dict] = {}
@@ -627,7 +719,7 @@ def _latest(path: Path, since: str = "") -> list[dict]:
             if line.strip():
                 r = json.loads(line)
                 if accept(r):
-                    last[_series_key(r)] = r
+                    last[(key or _series_key)(r)] = r
     return list(last.values())
 
 
@@ -693,8 +785,10 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
     vis_path = rec_dir / "visibility.jsonl"
     vis = visibility_pass(recs, vis_path) if args.visibility else (
         visibility_pass([], vis_path) if vis_path.exists() else {})
-    thr = json.loads(CALIBRATION.read_text()).get("series", {}).get("thresholds")
-    body = series_section(recs, variants, vis, thr)
+    orc_path = rec_dir / "oracle.jsonl"
+    orc = oracle_pass(recs, orc_path) if args.oracle else (
+        {_draw_key(r): r for r in _latest(orc_path, key=_draw_key)})
+    body = series_section(recs, variants, vis, orc)
     nulls = _latest(rec_dir / "series_null.jsonl", args.since) + [
         r for r in _latest(rec_dir / "series.jsonl", args.since) if r["cause"] == "none"]
     if nulls:
@@ -741,6 +835,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--keep-thresholds", action="store_true",
                     help="series --calibrate: keep the shipped thresholds, report and record "
                          "the false-cause rate on the null series (with the evaluation's)")
+    ap.add_argument("--oracle", action="store_true",
+                    help="series: the true law's drop (shape parameter pinned at the truth) "
+                         "on every 8-point draw of " + ", ".join(ORACLE_CAUSES))
     ap.add_argument("--visibility", action="store_true",
                     help="series: compute the oracle visibility of every effect draw first")
     ap.add_argument("--since", default="",
