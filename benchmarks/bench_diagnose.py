@@ -326,15 +326,16 @@ def make_snapshot(commit: str, root: Path) -> Path:
 
 def series_jobs(settings: list[tuple[int, float]], per_cause: int, pairs: int, periods: float,
                 seed: int, files: Path, variants: list[tuple[int, bool]],
-                causes: list[str] | None = None) -> list[dict]:
+                causes: list[str] | None = None, first: int = 0) -> list[dict]:
     """Every variant of every draw, ordered draw by draw (partial runs compare like with
     like: all variants of the first draws of every cause come first). ``pairs`` draws per
-    pair of effects cycle through :data:`EFFECT_PAIRS` (one pair per draw index)."""
+    pair of effects cycle through :data:`EFFECT_PAIRS` (one pair per draw index); ``first``:
+    the single-cause draws start at this index (the pairs always at 0)."""
     labels = list(CAUSES) if causes is None else list(causes)
     jobs = []
     for i in range(max(per_cause, pairs)):
         for spp, noise in settings:
-            todo = labels if i < per_cause else []
+            todo = labels if first <= i < per_cause else []
             if i < pairs:
                 todo = [*todo, "+".join(EFFECT_PAIRS[(3 * i) % len(EFFECT_PAIRS)])]
             for c in todo:
@@ -769,7 +770,8 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
         return series_calibrate(args, settings, rec_dir)
     jobs = series_jobs(settings, args.per_cause, args.pairs, args.periods, args.seed,
                        rec_dir / "series_files", variants,
-                       causes=args.causes.split(",") if args.causes else None)
+                       causes=args.causes.split(",") if args.causes else None,
+                       first=args.first)
     if args.report_only:            # the section from the records so far (a run in progress)
         path = rec_dir / "series.jsonl"
         have = {}
@@ -835,6 +837,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--keep-thresholds", action="store_true",
                     help="series --calibrate: keep the shipped thresholds, report and record "
                          "the false-cause rate on the null series (with the evaluation's)")
+    ap.add_argument("--first", type=int, default=0,
+                    help="series: first draw index of the single causes (split a run)")
     ap.add_argument("--oracle", action="store_true",
                     help="series: the true law's drop (shape parameter pinned at the truth) "
                          "on every 8-point draw of " + ", ".join(ORACLE_CAUSES))
