@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -130,3 +131,30 @@ def test_exponent_starts_hold_the_contact_force_at_the_reference_indentation():
     assert exps == pytest.approx([1.2, 2.5])  # the alternatives (the start's 1.5 is x)
     for c in cands:  # stiffness * DELTA_REF**exponent unchanged: same force at DELTA_REF
         assert 10 ** c[3] * DELTA_REF ** c[4] == pytest.approx(20.0 * DELTA_REF**1.5, rel=1e-9)
+
+
+def test_profiled_surface_position_agrees_with_the_direct_cost():
+    # on a linear ramp one prediction scores every surface position by a time shift; the
+    # plain reference is the cost evaluated at that surface position
+    curve = synthetic(TRUTH)
+    fit = CurveFitter(a0_m=0.015 * LENGTH, max_evaluations=5).fit(curve)
+    fit.max_evaluations = None
+    scale = curve.length_m / LENGTH  # lengths in units of the measured free amplitude
+    x = np.array([1.3 / scale, 1.0, math.log10(TRUTH.vdw / scale**3),
+                  math.log10(TRUTH.stiffness * scale**0.5)])
+    c_true = fit._cost(x)
+    for d in (-0.03, 0.012, 0.04):
+        y = x.copy()
+        y[0] += d
+        c, z = fit._profiled(y)
+        assert z[0] == pytest.approx(x[0], abs=0.003)  # 0.06 nm of 20
+        # the profile's history starts further out: within 15 % of the direct cost
+        assert c == pytest.approx(fit._cost(z), rel=0.15)
+        assert c < 0.2 * fit._cost(y)
+        assert c < 1.05 * c_true
+    # no profile off a straight approach ramp: the retraction, a curved ramp
+    from afmlearn.curves.fit import _linear_ramp
+    assert _linear_ramp(curve, curve.segment == 0) is not None
+    assert _linear_ramp(curve, curve.segment == 1) is None
+    bent = dataclasses.replace(curve, z_piezo=curve.z_piezo - 0.5 * (curve.tau / curve.tau[-1])**2)
+    assert _linear_ramp(bent, bent.segment == 0) is None
