@@ -15,6 +15,21 @@ Protocol (issue 5):
 Raw per-candidate statistics go to a JSON-lines file (resumable: finished traces are skipped
 when the command is run again); the confusion matrix is computed from them with the shipped
 calibration. Run: ``python benchmarks/bench_diagnose.py --calibrate`` (about an hour on 2 cores).
+
+Set-point series (``--series``, issue 12) run in pieces: one JSON line per (draw, variant) in
+``series.jsonl``, each naming the commit it was measured on (``--snapshot COMMIT`` runs a
+``git archive`` copy of that commit, so others' uncommitted edits in the shared tree cannot
+leak in). Select with ``--causes``, ``--first``/``--per-cause``, ``--pairs`` and
+``--variants`` (the 4- and 1-point variants are rows of the same 8-point draw; ``none`` = the
+same file with the drive phase dropped); ``--since COMMIT`` re-runs records older than a
+change; ``--report-only`` merges whatever is recorded and states per cell how many draws and
+which commits it rests on. ``--oracle`` adds the true law's drop per draw (is the effect
+visible at all?); ``--calibrate --keep-thresholds`` reports the false-cause rate on the
+pooled null series. Example (one niced single-threaded process)::
+
+    nice -n 10 python benchmarks/bench_diagnose.py --series --settings 200:0.01 \\
+        --causes electrostatic,none --per-cause 10 --pairs 0 --variants 8:phase \\
+        --periods 30 --workers 1 --snapshot HEAD --no-doc
 """
 
 from __future__ import annotations
@@ -724,6 +739,35 @@ def _latest(path: Path, since: str = "", key=None) -> list[dict]:
     return list(last.values())
 
 
+def harness_records(path: Path) -> list[dict]:
+    """Records of R's harness (``outputs/R/harness.py``: the same draws, 8 points with the
+    drive phase, 200 spp / 1 %, 30 periods, seed 2026) in this benchmark's format; the commit
+    comes from the sibling ``<stem>.commit`` file."""
+    if not path.exists():
+        return []
+    stamp = path.with_suffix(".commit")
+    commit = stamp.read_text().strip() if stamp.exists() else "?"
+    out = []
+    for line in path.read_text().splitlines():
+        if not line.strip():
+            continue
+        h = json.loads(line)
+        r = {"set_id": 3, "spp": 200, "noise": 0.01, "cause": h["cause"], "index": h["index"],
+             "seed": 2026, "periods": 30.0, "n_points": 8, "phase": True,
+             "case": {"effects": h.get("effects") or {}}, "commit": commit + " (R)",
+             "t_diag": h.get("t", math.nan), "exponent": None, "exponent_interval": None}
+        if "error" in h:
+            r.update(error=h["error"], cause_found="error", causes_found=[], gain=0.0,
+                     candidates=[])
+        else:
+            r.update(cause_found=h["found"], gain=h["gain"],
+                     causes_found=[{"cause": c, "gain": math.nan} for c in h["causes"]],
+                     candidates=[{"cause": c[0], "delta_chi2": c[2], "threshold": c[3],
+                                  "gain": c[4]} for c in h["cands"]])
+        out.append(r)
+    return out
+
+
 def series_null_check(recs: list[dict], rec_dir: Path, args: argparse.Namespace) -> int:
     """``--keep-thresholds``: pool the calibration nulls with the evaluation's null draws
     (``series.jsonl``, disjoint seeds), report the false-cause rate with the shipped
@@ -782,6 +826,9 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
                     if not args.since or _since(args.since)(r):
                         have[_series_key(r)] = r
         recs = [have[_series_key(j)] for j in jobs if _series_key(j) in have]
+        mine = {_series_key(r) for r in recs}
+        for extra in filter(None, args.harness.split(",")):
+            recs += [r for r in harness_records(Path(extra)) if _series_key(r) not in mine]
     else:
         recs = run_series_jobs(jobs, rec_dir / "series.jsonl", args.workers, since=args.since)
     vis_path = rec_dir / "visibility.jsonl"
@@ -837,6 +884,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--keep-thresholds", action="store_true",
                     help="series --calibrate: keep the shipped thresholds, report and record "
                          "the false-cause rate on the null series (with the evaluation's)")
+    ap.add_argument("--harness", default="",
+                    help="series --report-only: comma-separated JSON-lines files of R's harness "
+                         "(same draws) merged where this benchmark has no record")
     ap.add_argument("--first", type=int, default=0,
                     help="series: first draw index of the single causes (split a run)")
     ap.add_argument("--oracle", action="store_true",
