@@ -40,12 +40,15 @@ out of contact the step shrinks the same way with the estimated time to the swit
 (``(z_switch - z) / z'``), and the partial step that ends on the switch is graded too. This
 costs some 60--80 extra steps per contact and removes most of the error constant.
 
-Speed (``docs/benchmarks.md``, "Integrator throughput"): the step loop is kept small -- the
-force law and the RK4 stages are inlined, the rare switch location (:func:`_switch`) and the
-crossing solve past its quick reject (:func:`_crossing_solve`) are out of line. Inlining more
-(the whole RK4 step into the loop) or less (the force law) measured 1.5--2x slower steps. The
-per-step call :func:`_rk4` takes at most 30 arguments: CPython passes a call with more as
-``*args`` and numba then builds a tuple of all of them at every call (~20 % of a step).
+Speed (``docs/benchmarks.md``, "Integrator throughput"): the step loop :func:`_integrate` runs
+without numba's reference counting (``_nrt=False``; :func:`integrate_one` only allocates the
+buffers around it) and the whole RK4 step with its force evaluations is inlined into it. With
+reference counting on, numba increfs/decrefs the array arguments of every inlined call at every
+step, and an out-of-line RK4 step spent about a third of its time copying ~15 array structs
+onto the stack for the call; together they made a step ~1.6x slower. The rare switch location
+(:func:`_switch`) and the crossing solve past its quick reject (:func:`_crossing_solve`) stay
+out of line. Calls that are not inlined should take at most 30 arguments: CPython passes a call
+with more as ``*args`` and numba then builds a tuple of all of them at every call.
 
 Work integrals (``W``): 0 drive input ``int sum_i drive_i v_i``, 1 cantilever damping
 ``int sum_i D_i v_i**2``, 2 work done on the tip--sample force ``int F sum_i s_i v_i``,
@@ -114,7 +117,7 @@ def _gap(q, v, M, tau, c, s, yb, om, g0, gr):
     return g0 + gr * tau - x - yb * s, gr - xd - yb * om * c
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always", _nrt=False)
 def _rk4(q, v, W, M, tau, h, cm, sm, c1, s1, r, mp, yb, om, g0, gr, kinds, p1, p2, cf, a0,
          geometric, a1, pa, qn, vn, Wn, wk, pk):
     """One classical RK4 step of length ``h`` for ``q' = v, v' = a(q, v, tau)``.
@@ -122,7 +125,7 @@ def _rk4(q, v, W, M, tau, h, cm, sm, c1, s1, r, mp, yb, om, g0, gr, kinds, p1, p
     ``(a1, pa)`` is the first stage at ``(q, v, tau)``; drive cos/sin at the midpoint and the
     end are passed in. The new state goes to ``(qn, vn, Wn)``. ``wk`` (8, M) and ``pk``
     (3, N_WORK) are scratch buffers. ``mp`` (6, M) holds the modal ``K, Dair, Dcon, S, dc,
-    ds``: packed so that a call has at most 30 arguments (module docstring).
+    ds``. Inlined (module docstring, "Speed").
     """
     K = mp[0]
     Dair = mp[1]
@@ -281,7 +284,7 @@ def _switch(q, v, W, M, tau, hs, hh, zsw, hmin, r, r_new, mp, yb, om, g0, gr, th
     enter regime ``r_new``: Newton on the RK4 sub-step, the state (q, v, W) and the first stage
     (a1, pa) updated in place; returns ``(tau, cos, sin, z, z', F)`` after the switch.
 
-    Out of line: a rare branch, and a smaller step loop in :func:`integrate_one` ran faster.
+    Out of line: a rare branch, and a smaller step loop in :func:`_integrate` ran faster.
     """
     for _it in range(4):
         th1 = th0 + om * (tau + hs)
@@ -363,30 +366,6 @@ def integrate_one(q, v, W, r, th0, om, dc, ds, yb, g0, gr, K, Dair, Dcon, S, kin
         Recorded at ``k dt``, k = 0 .. n_samples - 1 (before each interval).
     """
     M = q.shape[0]
-    h = dt / substeps
-    a0 = hdr[H_A0]
-    has_contact = locate and hdr[H_CONTACT] != 0.0
-    brk = hdr[H_BREAK]
-    # a separate neck regime only where contact-gated terms read the gap (else r is 0 or 1)
-    gates = geometric and hdr[H_GATES] != 0.0
-    tau = 0.0
-    a1 = np.empty(M)
-    an = np.empty(M)
-    qn = np.empty(M)
-    vn = np.empty(M)
-    qe = np.empty(M)
-    ve = np.empty(M)
-    wk = np.empty((8, M))
-    pk = np.empty((3, N_WORK))
-    pa = np.empty(N_WORK)
-    pn = np.empty(N_WORK)
-    qg = np.empty(M)
-    vg = np.empty(M)
-    ag = np.empty(M)
-    Wg = np.empty(N_WORK)
-    pg = np.empty(N_WORK)
-    Wn = np.empty(N_WORK)
-    We = np.empty(N_WORK)
     mp = np.empty((6, M))  # modal parameters, one argument for _rk4 (see there)
     for i in range(M):
         mp[0, i] = K[i]
@@ -395,6 +374,55 @@ def integrate_one(q, v, W, r, th0, om, dc, ds, yb, g0, gr, K, Dair, Dcon, S, kin
         mp[3, i] = S[i]
         mp[4, i] = dc[i]
         mp[5, i] = ds[i]
+    r = _integrate(q, v, W, r, th0, om, yb, g0, gr, kinds, p1, p2, cf, hdr, dt, n_samples,
+                   substeps, locate, geometric, grade, q_out, v_out, f_out, c_out,
+                   record_velocity, mp, np.empty((9, M)), np.empty((6, N_WORK)),
+                   np.empty((8, M)), np.empty((3, N_WORK)))
+    if blowup < np.inf:
+        _blown(q, v, q_out, blowup, 0, n_samples, f_out, v_out, record_velocity)
+    return r
+
+
+@njit(cache=True, _nrt=False)
+def _integrate(q, v, W, r, th0, om, yb, g0, gr, kinds, p1, p2, cf, hdr, dt, n_samples, substeps,
+               locate, geometric, grade, q_out, v_out, f_out, c_out, record_velocity, mp, bm, bw,
+               wk, pk):
+    """The step loop of :func:`integrate_one` (same arguments; ``mp`` (6, M) the modal
+    parameters packed, ``bm`` (9, M), ``bw`` (6, N_WORK), ``wk`` (8, M) and ``pk``
+    (3, N_WORK) scratch buffers); returns the final regime.
+
+    Without reference counting (``_nrt=False``), so that the inlined RK4 step and force
+    evaluations cost no incref/decref per step (module docstring, "Speed").
+    """
+    M = q.shape[0]
+    h = dt / substeps
+    a0 = hdr[H_A0]
+    has_contact = locate and hdr[H_CONTACT] != 0.0
+    brk = hdr[H_BREAK]
+    # a separate neck regime only where contact-gated terms read the gap (else r is 0 or 1)
+    gates = geometric and hdr[H_GATES] != 0.0
+    tau = 0.0
+    K = mp[0]
+    Dair = mp[1]
+    Dcon = mp[2]
+    S = mp[3]
+    dc = mp[4]
+    ds = mp[5]
+    a1 = bm[0]
+    an = bm[1]
+    qn = bm[2]
+    vn = bm[3]
+    qe = bm[4]
+    ve = bm[5]
+    qg = bm[6]
+    vg = bm[7]
+    ag = bm[8]
+    pa = bw[0]
+    pn = bw[1]
+    Wg = bw[2]
+    pg = bw[3]
+    Wn = bw[4]
+    We = bw[5]
     hmin = GRADE_MIN * h
     grade_span = h / GRADE_RATIO if grade else -1.0
     tau_ev = -1e300  # time of the last entry into contact
@@ -498,8 +526,6 @@ def integrate_one(q, v, W, r, th0, om, dc, ds, yb, g0, gr, K, Dair, Dcon, S, kin
                 if r == CONTACT:
                     tau_ev = tau
             # after a graded or split step, c and s are exact at tau
-    if blowup < np.inf:
-        _blown(q, v, q_out, blowup, 0, n_samples, f_out, v_out, record_velocity)
     return r
 
 
