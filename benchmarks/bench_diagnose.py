@@ -378,7 +378,10 @@ def _hit(r: dict) -> bool:
 
 
 def _commits(recs: list[dict]) -> str:
-    return ", ".join(sorted({r.get("commit", "?")[:7] for r in recs}))
+    def short(c: str) -> str:
+        head, _, rest = c.partition(" ")
+        return head[:7] + ("+dirty" if "+dirty" in head else "") + (f" {rest}" if rest else "")
+    return ", ".join(sorted({short(r.get("commit", "?")) for r in recs}))
 
 
 def series_section(records: list[dict], variants: list[tuple[int, bool]],
