@@ -20,34 +20,20 @@ written atomically as PNG (temporary sibling, then ``os.replace``).
 from __future__ import annotations
 
 import os
-import uuid
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import savgol_filter
 
+from afmlearn.plots.trace import _save
+
 __all__ = ["plot_prediction", "plot_reliability", "plot_scores", "plot_unit_activation"]
 
 _MEASURED, _PREDICTED, _SWEET = "#1f77b4", "#d62728", "#2ca02c"
-
-
-def _save(fig: Figure, path: str | os.PathLike[str]) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    FigureCanvasAgg(fig)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    try:
-        fig.savefig(tmp, format="png", dpi=110)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
 
 
 def _rate(x: NDArray[np.float64], samples_per_period: int) -> NDArray[np.float64]:

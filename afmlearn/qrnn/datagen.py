@@ -93,7 +93,6 @@ import math
 import os
 import shutil
 import time
-import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -104,6 +103,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 
+from afmlearn.io._atomic import atomic_path
 from simulator import RK4, BaseExcitation, Cantilever, SensorChain, Sweep, System, TipExcitation
 from simulator.forces import DMT
 from simulator.labels import coupling_strength, lock_in
@@ -763,14 +763,8 @@ def _label_points(spec: DatasetSpec, points: dict[str, NDArray], direction: NDAr
 
 # ---------------------------------------------------------------------------- cache
 def _save_npz(path: Path, arrays: dict[str, Any]) -> None:
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    try:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **{k.replace("/", "__"): v for k, v in arrays.items()})
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, **{k.replace("/", "__"): v for k, v in arrays.items()})
 
 
 def _load_npz(path: Path) -> dict[str, Any]:
@@ -876,34 +870,28 @@ def _assemble(path: Path, spec: DatasetSpec, parts: list[dict[str, Any]],
     for key in ("cantilever_id", "sweep_id", "point_index", "coupling", "coupled", "sweet",
                 "shares"):
         win[key] = pts[key][pidx]
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    try:
-        with h5py.File(tmp, "w") as fh:
-            fh.attrs.update({
-                "format": _FORMAT, "format_version": 1, "spec_hash": spec.hash,
-                "spec_json": json.dumps(spec.to_dict()), "generator_version": GENERATOR_VERSION,
-                "generation_seconds": seconds, "n_cantilevers": len(parts),
-                "n_sweeps": n_sweeps, "n_points": n_points, "n_windows": pidx.size,
-                "samples_per_period": spec.samples_per_period,
-                "target_periods": spec.target_periods, "n_features": N_FEATURES,
-            })
-            for group, arrays in (("points", pts), ("windows", win), ("sweeps", swp)):
-                g = fh.create_group(group)
-                for key, val in arrays.items():
-                    val = np.asarray(val)
-                    if val.dtype == np.float64 and key not in ("omega", "sweet_lo", "sweet_hi"):
-                        val = val.astype(np.float32)
-                    g.create_dataset(key, data=val)
-            g = fh.create_group("cantilevers")
-            g.create_dataset("n_modes", data=n_modes)
-            g.create_dataset("family", data=family)
-            g.create_dataset("excitation", data=excitation)
-            g.create_dataset("ratio2", data=np.array([p["ratio2"] for p in params]))
-            g.attrs["params_json"] = json.dumps(params)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as fh:
+        fh.attrs.update({
+            "format": _FORMAT, "format_version": 1, "spec_hash": spec.hash,
+            "spec_json": json.dumps(spec.to_dict()), "generator_version": GENERATOR_VERSION,
+            "generation_seconds": seconds, "n_cantilevers": len(parts),
+            "n_sweeps": n_sweeps, "n_points": n_points, "n_windows": pidx.size,
+            "samples_per_period": spec.samples_per_period,
+            "target_periods": spec.target_periods, "n_features": N_FEATURES,
+        })
+        for group, arrays in (("points", pts), ("windows", win), ("sweeps", swp)):
+            g = fh.create_group(group)
+            for key, val in arrays.items():
+                val = np.asarray(val)
+                if val.dtype == np.float64 and key not in ("omega", "sweet_lo", "sweet_hi"):
+                    val = val.astype(np.float32)
+                g.create_dataset(key, data=val)
+        g = fh.create_group("cantilevers")
+        g.create_dataset("n_modes", data=n_modes)
+        g.create_dataset("family", data=family)
+        g.create_dataset("excitation", data=excitation)
+        g.create_dataset("ratio2", data=np.array([p["ratio2"] for p in params]))
+        g.attrs["params_json"] = json.dumps(params)
 
 
 def dataset_summary(path: str | os.PathLike[str]) -> dict[str, Any]:

@@ -30,9 +30,7 @@ checkpoint written by :func:`afmlearn.qrnn.train.train` (``last.ckpt``, the best
 
 from __future__ import annotations
 
-import json
 import os
-import uuid
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +38,7 @@ import numpy as np
 import torch
 from hydra.utils import instantiate
 
-from afmlearn.io import Trace, read_trace
+from afmlearn.io import Trace, read_trace, write_json
 from afmlearn.preprocess.checks import check_trace
 from afmlearn.qrnn.calibration import CouplingCalibration
 from afmlearn.qrnn.coupling import directions, sweet_spot_interval, trace_scores
@@ -241,16 +239,6 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
                        "frequency_hz": f_rows[rows]}}
 
 
-def _write_json(path: Path, data: dict[str, Any]) -> None:
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    try:
-        tmp.write_text(json.dumps(data, indent=2) + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def _figures(result: dict[str, Any], out: Path, run: dict[str, Any]) -> list[str]:
     from afmlearn.plots.qrnn import plot_prediction, plot_scores
 
@@ -314,7 +302,7 @@ def infer(trace_path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *
                          "horizon": int(run["horizon"])},
                **result["summary"]}
     summary["figures"] = _figures(result, out, run) if figures else []
-    _write_json(out / "coupling.json", summary)
+    write_json(out / "coupling.json", summary)
     return {**summary, "output": str(out / "coupling.json")}
 
 

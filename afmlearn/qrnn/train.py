@@ -21,7 +21,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import uuid
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -33,6 +32,7 @@ from hydra.utils import instantiate
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint
 from omegaconf import DictConfig, OmegaConf
 
+from afmlearn.io._atomic import atomic_path
 from afmlearn.qrnn.calibration import CouplingCalibration, expected_calibration_error
 from afmlearn.qrnn.evaluate import collect, evaluate, trace_table
 from afmlearn.qrnn.module import CHECKPOINT_KEY, OrbitModule
@@ -95,13 +95,8 @@ def _input_size(datamodule: pl.LightningDataModule) -> tuple[int, int]:
 
 def _atomic_write_text(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    try:
+    with atomic_path(path) as tmp:
         tmp.write_text(text)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def export_checkpoint(module: OrbitModule, path: str | os.PathLike[str], *,
@@ -130,13 +125,8 @@ def export_checkpoint(module: OrbitModule, path: str | os.PathLike[str], *,
         checkpoint[CHECKPOINT_KEY]["calibration"] = calibration["all"].to_dict()
         checkpoint[CHECKPOINT_KEY]["calibration_by_kind"] = {
             k: c.to_dict() for k, c in calibration.items() if k != "all"}
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    try:
+    with atomic_path(path) as tmp:
         torch.save(checkpoint, tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return path
 
 
