@@ -14,10 +14,9 @@ status 2.
 
 from __future__ import annotations
 
-import sys
-
 import hydra
 import torch
+from _cli import bad_input_exits
 from omegaconf import DictConfig
 
 from afmlearn.qrnn.infer import infer
@@ -28,13 +27,10 @@ def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.qrnn.infer.infer` and print a short summary."""
     if cfg.get("threads"):
         torch.set_num_threads(int(cfg.threads))
-    try:
+    with bad_input_exits(ValueError):  # includes afmlearn.io.TraceFormatError
         result = infer(cfg.trace, cfg.out_dir, checkpoint=cfg.checkpoint,
                        threshold=None if cfg.threshold is None else float(cfg.threshold),
                        figures=bool(cfg.figures))
-    except ValueError as err:          # includes afmlearn.io.TraceFormatError
-        print(f"error: {err}", file=sys.stderr)
-        sys.exit(2)
     if result["is_sweep"]:
         print(f"{result['n_traces']} sweep points, flagged coupled: "
               f"{result['flagged_fraction']:.0%}")

@@ -10,12 +10,13 @@ Examples
 
 Re-running a command resumes from <output_dir>/checkpoints/last.ckpt (ckpt_path=last).
 All options live in conf/ (see conf/train_qrnn.yaml); the work is done by
-afmlearn.qrnn.train.train.
+afmlearn.qrnn.train.train. Bad settings print one line `error: ...` and exit with status 2.
 """
 
 from __future__ import annotations
 
 import hydra
+from _cli import bad_input_exits
 from omegaconf import DictConfig
 
 from afmlearn.qrnn.train import train
@@ -24,7 +25,8 @@ from afmlearn.qrnn.train import train
 @hydra.main(config_path="../conf", config_name="train_qrnn", version_base="1.3")
 def main(cfg: DictConfig) -> float:
     """Run :func:`afmlearn.qrnn.train.train`; return ``val/loss`` (what a tuner minimises)."""
-    metrics, objects = train(cfg)
+    with bad_input_exits(ValueError):  # bad settings name the key
+        metrics, objects = train(cfg)
     width = max(len(k) for k in metrics)
     for key, value in sorted(metrics.items()):
         print(f"{key:<{width}}  {value:.6g}")

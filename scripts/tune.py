@@ -15,10 +15,10 @@ prints `error: ...` and exits with status 2.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import hydra
+from _cli import bad_input_exits
 from omegaconf import DictConfig, OmegaConf
 
 from afmlearn.tune.matched import evaluate
@@ -30,11 +30,8 @@ OmegaConf.register_new_resolver("stem", lambda path: Path(str(path)).stem, repla
 @hydra.main(config_path="../conf", config_name="tune", version_base="1.3")
 def main(cfg: DictConfig) -> float:
     """Run :func:`afmlearn.tune.matched.evaluate`; return the mean force accuracy."""
-    try:
+    with bad_input_exits(ValueError):
         metrics, _ = evaluate(cfg)
-    except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        sys.exit(2)
     for key, value in sorted(metrics.items()):
         print(f"{key:<20}  {value:.6g}")
     return metrics["force_accuracy"]

@@ -163,6 +163,7 @@ def test_cli_refuses_a_clipped_trace_with_one_line(tiny_run, tmp_path, monkeypat
                                       f"out_dir={tmp_path / 'out'}",
                                       f"checkpoint={tiny_run['checkpoint']}",
                                       "hydra.output_subdir=null"])
+    monkeypatch.syspath_prepend(str(ROOT / "scripts"))  # as `python scripts/x.py` has it
     with pytest.raises(SystemExit) as exc:
         runpy.run_path(str(ROOT / "scripts" / "infer_qrnn.py"), run_name="__main__")
     err = capsys.readouterr().err.strip().splitlines()
