@@ -149,12 +149,26 @@ def force_errors(diag: CurveDiagnoser, data: dict, truth: dict) -> dict:
     for name, fn in (("sjk", sader_jarvis_katan), ("hoelscher", hoelscher)):
         dd, f = fn(gap * nm, amp_s * nm, ph_s, omega=1.0, drive=a_f / Q * nm, n_bins=PEER_BINS)
         keep = np.concatenate([[True], np.diff(dd) > 0])
-        out[name] = nrmse(np.interp(grid, dd[keep], f[keep]) * K, f_true)  # k nm -> nN
+        f_peer = np.interp(grid, dd[keep], f[keep]) * K  # k nm -> nN
+        out[name] = nrmse(f_peer, f_true)
+        out.update(_by_region(name, f_peer, f_true, grid))
     ext = diag.extended_
     f_fit = ext.law_.conservative(grid * 1e-9 / curve.length_m) * curve.force_unit_n * nm
     out["afmlearn"] = nrmse(f_fit, f_true)
+    out.update(_by_region("afmlearn", f_fit, f_true, grid))
     out["n_zone"] = int(zone.sum())
     out["grid_nm"] = [float(grid[0]), float(grid[-1])]
+    return out
+
+
+def _by_region(name: str, f: np.ndarray, f_true: np.ndarray, grid_nm: np.ndarray) -> dict:
+    """RMS force error in contact (turning point below ``A0``) and out of contact, each over
+    the whole grid's force range (the two parts are comparable with the whole NRMSE)."""
+    scale = float(np.ptp(f_true))
+    out = {}
+    for region, m in (("contact", grid_nm < A0 * 1e9), ("attractive", grid_nm >= A0 * 1e9)):
+        out[f"{name}_{region}"] = (nrmse(f[m], f_true[m], scale=scale)
+                                   if m.any() and scale > 0 else math.nan)
     return out
 
 
@@ -174,7 +188,8 @@ def run_one(job: dict) -> dict:
     errs = force_errors(diag, d, case["truth"])
     return {**job, "named": diag.cause_, "gain": diag.gain_, "confidence": diag.confidence_,
             "candidates": diag.candidates_, "errors": errs, "t_sim": t_sim, "t_fit": t_fit,
-            "n_evaluations": diag.n_evaluations_, "exposure": exposure(d, case["truth"])}
+            "n_evaluations": diag.n_evaluations_, "exposure": exposure(d, case["truth"]),
+            "law": diag.extended_.values_, "baseline_chi2": diag.baseline_.chi2_}
 
 
 def exposure(data: dict, truth: dict) -> dict:
@@ -254,6 +269,18 @@ def load(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
+def _regions(rs: list[dict]) -> str:
+    """Median force errors of afmlearn and the SJ peer in and out of contact (records of this
+    benchmark version; blank for older records)."""
+    parts = []
+    for region in ("contact", "attractive"):
+        a = np.array([r["errors"].get(f"afmlearn_{region}", math.nan) for r in rs], dtype=float)
+        b = np.array([r["errors"].get(f"sjk_{region}", math.nan) for r in rs], dtype=float)
+        ok = np.isfinite(a) & np.isfinite(b)
+        parts.append(f"{fmt(np.median(a[ok]))} / {fmt(np.median(b[ok]))}" if ok.any() else "")
+    return "; ".join(parts) if any(parts) else ""
+
+
 def section(recs: list[dict], args, oracles: dict | None = None) -> str:
     oracles = oracles or {}
     rows = []
@@ -286,7 +313,7 @@ def section(recs: list[dict], args, oracles: dict | None = None) -> str:
                       if obs else "")
         rows.append([cause, len(rs), f"{100 * acc:.0f} %", observable, touch,
                      fmt(np.nanmedian(ea)),
-                     fmt(np.nanmedian(es)), fmt(np.nanmedian(eh)), fmt(ratio),
+                     fmt(np.nanmedian(es)), fmt(np.nanmedian(eh)), fmt(ratio), _regions(rs),
                      fmt(np.median([r["t_fit"] for r in rs]), 3), named])
     allr = np.array(ratios)
     acc_all = np.mean([r["named"] == r["cause"] for r in recs])
@@ -294,7 +321,9 @@ def section(recs: list[dict], args, oracles: dict | None = None) -> str:
             "truth's own evidence > 10 (oracle); of those named right",
             "tip touched, median indentation, ended repulsive (truth)", "force NRMSE afmlearn",
             "force NRMSE peer (Katan/Payam SJ)", "force NRMSE peer (Hoelscher)",
-            "median ratio afmlearn / SJ", "fit time [s]", "named as"]
+            "median ratio afmlearn / SJ",
+            "median force error afmlearn / SJ in contact; out of contact (each over the whole "
+            "force range)", "fit time [s]", "named as"]
     text = [
         f"{len(recs)} synthetic curves ({args.per_cause} per cause requested), "
         f"{args.periods:g} drive periods per ramp, output every {args.every} periods, "
