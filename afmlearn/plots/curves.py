@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
 
 from afmlearn.curves import CurveDiagnoser
 from afmlearn.curves.dissipation import dissipated_energy
@@ -303,10 +304,10 @@ def plot_parameter_spread(rows: list[dict], out_dir: Path) -> Path:
         ax.set_xlabel(key, fontsize=8)
         ax.set_ylabel("curves")
         data, flags = table.get(key, ({g: np.empty(0) for g in groups}, {}))
-        note = ", ".join(f"{n} at {'a bound' if f == 'bound' else 'the start'}"
+        note = ", ".join(f"{n} at {'a bound' if f == 'bound' else 'a start'}"
                          for f, n in sorted(flags.items()))
         if note:
-            ax.set_title(f"not identified (not shown): {note}", fontsize=7)
+            ax.set_title(f"not identified, left out: {note}", fontsize=7)
         allv = np.concatenate([d for d in data.values()])
         if allv.size == 0:
             ax.text(0.5, 0.5, "no curve", ha="center", va="center", transform=ax.transAxes)
@@ -318,6 +319,7 @@ def plot_parameter_spread(rows: list[dict], out_dir: Path) -> Path:
                 label=[f"{g} ({data[g].size})" for g in groups])
         if logx:
             ax.set_xscale("log")
+            ax.xaxis.set_minor_formatter(NullFormatter())
         ax.legend(fontsize=7)
     lines = []
     for g in groups:
