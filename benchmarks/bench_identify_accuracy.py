@@ -492,6 +492,12 @@ def run_joint(scase: IC.SeriesCase, n_obs: int | str, recorded: bool) -> dict[st
             "phase_method": s.get("drive_phase_method")}
 
 
+def _inside(iv: list[float] | None) -> bool:
+    """An output-error interval strictly inside the profile's walk grid (0.5 ... 3.9): the
+    ``bounded`` rule of the current code, applied alike to records of older code."""
+    return iv is not None and iv[0] > 0.5 + 1e-3 and iv[1] < 3.9 - 1e-3
+
+
 def main_joint(argv: list[str] | None = None) -> str:
     """Side-by-side on the same draws: 1 vs 4 vs 8 set-points, recorded phase or not."""
     ap = argparse.ArgumentParser(description="joint identification across set-points")
@@ -499,7 +505,8 @@ def main_joint(argv: list[str] | None = None) -> str:
     ap.add_argument("--reduced", action="store_true",
                     help="1000 spp / 0.5 %: p = 1.5 only; the fitted drive phase: p = 1.5 at "
                          "200 spp / 1 % only")
-    ap.add_argument("--periods", type=int, default=60)
+    ap.add_argument("--periods", default="60",
+                    help="recorded periods per row; comma-separated: one series per value")
     ap.add_argument("--points", default="1,4,8,8x2A",
                     help="comma-separated set-point counts to run (from 1, 4, 8, and 8x2A: "
                          "8 set-points at two free amplitudes)")
@@ -509,6 +516,8 @@ def main_joint(argv: list[str] | None = None) -> str:
                     help=f"comma-separated settings to run (from {', '.join(JOINT_SETTINGS)})")
     ap.add_argument("--phase", choices=("rec", "fit", "both"), default="both",
                     help="recorded drive phase, fitted, or both")
+    ap.add_argument("--with-ee", action="store_true",
+                    help="also list the earlier equation-error records in the table")
     ap.add_argument("--cached-only", action="store_true",
                     help="write the table from finished cases only (no new fits)")
     C.add_doc_flag(ap)
@@ -516,6 +525,7 @@ def main_joint(argv: list[str] | None = None) -> str:
     info = C.machine_info()
     store = Store(IC.CACHE / "results_joint.json")
     grid = []
+    periods = [int(v) for v in str(args.periods).split(",")]
     exps = EXPONENTS if args.exponents is None else [float(v) for v in args.exponents.split(",")]
     sets = list(JOINT_SETTINGS) if args.settings is None else args.settings.split(",")
     phases = {"rec": (True,), "fit": (False,), "both": (True, False)}[args.phase]
@@ -527,69 +537,82 @@ def main_joint(argv: list[str] | None = None) -> str:
                 if args.reduced and not recorded and (p != 1.5 or setting != "200spp_1pct"):
                     continue
                 for n in (1, 4, 8, "8x2A"):
-                    if str(n) in args.points.split(","):
-                        grid.append((p, setting, recorded, n))
-    def key_of(p: float, setting: str, recorded: bool, n: int | str, stage: str) -> str:
+                    for per in periods:
+                        if str(n) in args.points.split(","):
+                            grid.append((p, setting, recorded, n, per))
+
+    def key_of(p: float, setting: str, recorded: bool, n: int | str, per: int,
+               stage: str) -> str:
         # "ee": records of the equation-error joint fit (before the output-error stage; kept
         # from earlier runs, not re-run); "oe": the joint fit with its output-error stage
-        key = f"joint/{p}/{setting}/{args.periods}/{'rec' if recorded else 'fit'}/{n}"
+        key = f"joint/{p}/{setting}/{per}/{'rec' if recorded else 'fit'}/{n}"
         return key + ("/oe" if stage == "oe" else "")
 
     if not args.cached_only:
         # the most telling records first: 200 spp, recorded phase, 8 set-points (two
         # amplitudes, one), then fewer set-points, the fitted phase, 1,000 spp
         order = {"8x2A": 0, 8: 1, 4: 2, 1: 3}
-        for p, setting, recorded, n in sorted(grid, key=lambda g: (
-                g[1] != "200spp_1pct", not g[2], order[g[3]], g[0])):
-            key = key_of(p, setting, recorded, n, "oe")
+        for p, setting, recorded, n, per in sorted(grid, key=lambda g: (
+                g[1] != "200spp_1pct", not g[2], order[g[3]], g[4], g[0])):
+            key = key_of(p, setting, recorded, n, per, "oe")
             if key in store.data:
                 continue
             print(f"[joint] {key}", flush=True)
-            rec = run_joint(joint_series(p, setting, periods=args.periods,
+            rec = run_joint(joint_series(p, setting, periods=per,
                                          two_amplitudes=n == "8x2A"), n, recorded)
             rec["git"] = git_short()
             rec["identify_hash"] = identify_hash()
             rec["load"] = os.getloadavg()[0]
             store.put(key, rec)
     rows = []
-    for (p, setting, recorded, n), stage in itertools.product(grid, ("ee", "oe")):
-        rec = store.data.get(key_of(p, setting, recorded, n, stage))
-        if rec is None:
+    for (p, setting, recorded, n, per), stage in itertools.product(grid, ("ee", "oe")):
+        rec = store.data.get(key_of(p, setting, recorded, n, per, stage))
+        if rec is None or (stage == "ee" and not args.with_ee):
             continue
         iv = rec["interval"]
         err = None if rec["exponent"] is None else rec["exponent"] - p
         rows.append([p, setting.replace("_", ", ").replace("pct", " %"),
                      "output error" if stage == "oe"
                      else f"equation error ({rec.get('git') or 'earlier run'})",
-                     "recorded" if recorded else "fitted", n,
+                     "recorded" if recorded else "fitted",
+                     "8 at two free amplitudes" if n == "8x2A" else n, per,
                      "—" if rec["exponent"] is None else f"{rec['exponent']:.3f}",
                      "—" if err is None else f"{err:+.3f}",
                      "—" if iv is None else f"{iv[0]:.2f} – {iv[1]:.2f}",
                      "—" if iv is None else f"{iv[1] - iv[0]:.2f}",
-                     "—" if rec["bounded"] is None else ("yes" if rec["bounded"] else "NO"),
-                     "—" if not rec.get("cv_interval") else
+                     "—" if rec["bounded"] is None else (
+                         "yes" if rec["bounded"] and (stage == "ee" or _inside(iv)) else "NO"),
+                     "—" if not rec.get("cv_interval") or rec["cv_interval"][0] is None
+                     or not math.isfinite(rec["cv_interval"][0]) else
                      f"{rec['cv_interval'][0]:.2f} – {rec['cv_interval'][1]:.2f}",
                      pct(_a(rec, "whole")), pct(_a(rec, "repulsive")),
                      pct(_a(rec, "attractive")), pct(_a(rec, "near_a0")),
+                     f"{rec['a0_over_true']:.2f}" if "a0_over_true" in rec else "—",
                      f"{rec['fit_s']:.0f}" + (f" ({rec['load']:.1f})" if "load" in rec else "")])
-    table = C.md_table(["true p", "setting", "fit", "drive phase", "set-points", "identified p",
-                        "error", "95 % interval", "width", "bounded", "CV interval", "whole %",
-                        "repulsive %", "attractive %", "near a0 %", "fit [s] (load)"], rows)
+    table = C.md_table(["true p", "setting", "fit", "drive phase", "set-points", "periods",
+                        "identified p", "error", "95 % interval", "width", "bounded",
+                        "CV interval", "whole %", "repulsive %", "attractive %", "near a0 %",
+                        "a0 / true", "fit [s] (load)"], rows)
     body = f"""
 `ForceIdentifier(drive_phase=RecordedPhase() | FittedPhase(), n_bootstrap=0).fit_joint(...)`
 (afmlearn.identify.joint: one law over all set-points). "fit": "output error" = the joint fit
 with its output-error stage (afmlearn.identify.output_error: every set-point's periodic orbit
 simulated from the law by shooting on the one kernel and compared with its measured harmonics;
-exponent profile over that objective, lower envelope over the selected and the baseline law);
-"equation error (git)" = records of the joint fit before that stage (harmonic-balance rows
-whitened per set-point, gap offsets, exponent profile on block-mean rows), kept from the run
-at that commit and not re-run. "fit [s] (load)": wall time of one identification and the
-1-min load average when the record was written (older records: load not recorded). Set-point
-series
-simulated row by row with `scenario=steady` at rest gaps {JOINT_GAPS} L_ref (free amplitude
-1.5 L_ref; settle 1200 periods plus a random fraction: a random drive phase per row),
-{args.periods} recorded periods per row, seed 0. The 1- and 4-set-point experiments are
-subsets {JOINT_SUBSETS[1]} and {JOINT_SUBSETS[4]} of the SAME 8 rows. p = 1.5: `force=dmt`;
+exponent profile over that objective, lower envelope over the selected and the baseline law,
+every profile point restarted from 5 contact onsets); with `--with-ee`, "equation error
+(git)" = records of the joint fit before that stage (harmonic-balance rows whitened per
+set-point, gap offsets, exponent profile on block-mean rows), kept from the run at that
+commit and not re-run. "fit [s] (load)": wall time of one identification and the 1-min load
+average when the record was written (2 cores shared by 7 agents). Set-point series simulated
+row by row with `scenario=steady` at rest gaps {JOINT_GAPS} L_ref (free amplitude 1.5 L_ref;
+settle 1200 periods plus a random fraction: a random drive phase per row), "periods" recorded
+periods per row, seed 0. The 1- and 4-set-point experiments are subsets {JOINT_SUBSETS[1]}
+and {JOINT_SUBSETS[4]} of the SAME 8 rows. "8 at two free amplitudes": rows at rest gaps
+{JOINT_TWO_AMP_GAPS} L_ref with free amplitudes {JOINT_TWO_AMP_RATIOS[0]} (the first four)
+and {JOINT_TWO_AMP_RATIOS[-1]} L_ref (the last four), simulated as their own rows (other
+noise draws); the unit is then their mean rest gap (2.1 x 10 nm), so `a0` = 0.0143 instead
+of 0.0286. "bounded": both ends of the interval strictly inside the profile's grid 0.5 … 3.9;
+"a0 / true": identified over true contact onset. p = 1.5: `force=dmt`;
 p = 2, 2.27: `force=dmt_cone` matched to the sphere at an indentation of {DELTA_MATCH} L_ref.
 "95 % interval": profile likelihood (output error: where chi² rises 3.841 x max(1,
 chi²/dof) above its minimum; equation error: on block-mean rows); "CV interval" (equation

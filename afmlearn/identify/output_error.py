@@ -651,7 +651,10 @@ class OutputErrorProfile:
         prof = np.array([(k, env[k][0]) for k in ks])
         level = 3.841 * best.dispersion
         lo, hi, crossed = _crossings(prof, level)
-        bounded = bool(crossed and lo > self.low + 1e-9 and hi < self.high - 1e-9)
+        # bounded: both ends strictly inside the walk's grid (an end at its last point, or
+        # beyond it at a scan's or the estimate's exponent, is the range's end)
+        top = self.low + self.step * math.floor((self.high - self.low) / self.step + 1e-9)
+        bounded = bool(crossed and lo > self.low + 1e-6 and hi < top - 1e-6)
         # "n_rows": the count for which n log(score / score_min) ~ (score - score_min) /
         # dispersion, the equation-error profile's statistic (what the figures draw)
         n_eq = float(np.nanmin(prof[:, 1])) / best.dispersion
