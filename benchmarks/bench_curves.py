@@ -479,14 +479,16 @@ def group_section(recs: list[dict], args) -> str:
             {c: sum(r["named_joint"] == c for r in rs)
              for c in {r["named_joint"] for r in rs}}.items()))
         gains = [r["gain_joint"] for r in rs if r["named_joint"] == cause]
-        rows.append([cause, len(rs), f"{sum(single)}/{len(single)}",
+        agree = sum(len({m["named"] for m in r["members"]}) == 1 for r in rs)
+        rows.append([cause, len(rs), f"{sum(single)}/{len(single)}", f"{agree}/{len(rs)}",
                      f"{sum(joint)}/{len(joint)}", fmt(np.nanmedian(ratio_s)),
                      fmt(np.nanmedian(ratio_j)),
                      fmt(np.median(gains)) if gains else "",
                      fmt(np.median([r["t_single"] for r in rs]), 3),
                      fmt(np.median([r["t_joint"] for r in rs]), 3), named])
     head = ["cause (hidden)", "groups", "single-curve named right (curves)",
-            "joint named right (groups)", "force error / SJ peer, single (median)",
+            "single: one cause on all curves of the group", "joint named right (groups)",
+            "force error / SJ peer, single (median)",
             "force error / SJ peer, joint (median)", "leave-one-out gain (joint, named right)",
             "single fits per group [s]", "joint fit [s]", "joint named as"]
     loads = [r["load"] for r in recs if r.get("load") is not None]

@@ -75,13 +75,20 @@ def group_length(curves: Sequence[Curve]) -> float:
     return float(np.exp(np.mean([math.log(c.length_m) for c in curves])))
 
 
+#: surface guess of a curve whose amplitude is never reduced below 90 %, below its closest
+#: piezo position (/ free amplitude): out of the tip's reach within the +-0.6 bounds, so the
+#: model's tip is not forced onto the surface (a fake dip that an extension would "explain")
+FLAT_OFFSET = 1.5
+
+
 def offset_guess(curve: Curve) -> float:
     """Surface position guess (/ free amplitude): the piezo position minus the amplitude where
-    the approach's amplitude is reduced to 20--90 % (the single fit's scan centre)."""
+    the approach's amplitude is reduced to 20--90 % (the single fit's scan centre); for a
+    curve that never gets there, ``FLAT_OFFSET`` below its closest piezo position."""
     app = curve.segment == 0
     sel = app & (curve.amplitude > 0.2) & (curve.amplitude < 0.9)
     return (float(np.median(curve.z_piezo[sel] - curve.amplitude[sel])) if sel.any()
-            else float(np.min(curve.z_piezo[app])))
+            else float(np.min(curve.z_piezo[app])) - FLAT_OFFSET)
 
 
 class _Budget(Exception):

@@ -147,3 +147,19 @@ def test_a_start_from_another_set_of_curves_is_the_same_si_law():
                        rescales=((1.0, 1.0),), start=sub).fit(curves[1:])
     assert part.length_m_ != pytest.approx(full.length_m_, rel=1e-3)
     assert part.chi2_ == pytest.approx(sum(full.chi2_curves_[1:]), rel=1e-9)
+
+
+def test_a_flat_curve_keeps_its_surface_out_of_reach():
+    """A curve that never meets the surface (amplitude stays free): the surface guess and its
+    bounds lie beyond the closest rest gap of one free amplitude (no forced fake contact)."""
+    from afmlearn.curves.group import offset_guess
+
+    flat = synthetic(DAMPED.replace(vdw=0.0, damping=0.0), 20e-9, 1.0, n=40)
+    flat = Curve(tau=flat.tau, amplitude=np.ones_like(flat.amplitude), phase=flat.phase,
+                 z_piezo=flat.z_piezo, segment=flat.segment, quality_factor=Q,
+                 spring_constant_n_per_m=K_N, resonance_frequency_hz=F0, length_m=20e-9,
+                 drive_frequency_hz=F0)
+    closest = float(np.min(flat.z_piezo))
+    assert offset_guess(flat) + 0.6 < closest - 0.8
+    touching = synthetic(DAMPED, 20e-9, 1.0, n=60)
+    assert offset_guess(touching) == pytest.approx(1.0, abs=0.1)
