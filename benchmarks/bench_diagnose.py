@@ -310,6 +310,15 @@ def run_series_jobs(jobs: list[dict], records: Path, workers: int,
                     desc="diagnose series", accept=_since(since) if since else None)
 
 
+def _newer(a: str, b: str) -> bool:
+    """Commit ``a`` (a record's, maybe marked) is a strict descendant of ``b``."""
+    a, b = a.split()[0].split("+")[0], (b.split() or ["?"])[0].split("+")[0]
+    if a == b or "?" in (a, b) or "unknown" in (a, b):
+        return False
+    return subprocess.run(["git", "-C", str(ROOT), "merge-base", "--is-ancestor", b, a],
+                          capture_output=True, timeout=10).returncode == 0
+
+
 def _since(commit: str):
     """Record filter: taken on ``commit`` or a descendant (never on a dirty tree)."""
     cache: dict[str, bool] = {}
@@ -713,7 +722,15 @@ def null_table(nulls: list[dict]) -> str:
     for r in nulls:
         groups.setdefault((r["spp"], r["noise"], r["n_points"], r["phase"]), []).append(r)
     rows = []
-    for (spp, noise, n_pts, phase), rs in sorted(groups.items(), reverse=True):
+    split: list[tuple[tuple, list[dict]]] = []
+    for g, rs in sorted(groups.items(), reverse=True):
+        by_commit: dict[str, list[dict]] = {}
+        for r in rs:
+            by_commit.setdefault(_commits([r]), []).append(r)
+        split += [(g, v) for _, v in sorted(by_commit.items())]
+        if len(by_commit) > 1:
+            split.append((g, rs))
+    for (spp, noise, n_pts, phase), rs in split:
         ok = [r for r in rs if r.get("candidates")]
         k = sum(r["cause_found"] != "none" for r in rs)       # a raise is not a false cause
         above = sum(any(c["delta_chi2"] > c["threshold"] for c in r["candidates"]) for r in ok)
@@ -777,6 +794,8 @@ def series_null_check(recs: list[dict], rec_dir: Path, args: argparse.Namespace)
     thresholds and write it into the ``"series"`` source of ``null_calibration.json``."""
     pool = list(recs) + [r for r in _latest(rec_dir / "series.jsonl", args.since)
                          if r["cause"] == "none"]
+    for extra in filter(None, args.harness.split(",")):
+        pool += [r for r in harness_records(Path(extra)) if r["cause"] == "none"]
     table = null_table(pool)
     print(table)
     main = [r for r in pool if r["n_points"] == 8 and r["phase"] and r["spp"] == 200]
@@ -829,9 +848,17 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
                     if not args.since or _since(args.since)(r):
                         have[_series_key(r)] = r
         recs = [have[_series_key(j)] for j in jobs if _series_key(j) in have]
-        mine = {_series_key(r) for r in recs}
+        # a harness record replaces this benchmark's record of the same draw when it was
+        # taken on a later commit
+        at = {_series_key(r): i for i, r in enumerate(recs)}
         for extra in filter(None, args.harness.split(",")):
-            recs += [r for r in harness_records(Path(extra)) if _series_key(r) not in mine]
+            for r in harness_records(Path(extra)):
+                k = _series_key(r)
+                if k not in at:
+                    at[k] = len(recs)
+                    recs.append(r)
+                elif _newer(r["commit"], recs[at[k]].get("commit", "")):
+                    recs[at[k]] = r
     else:
         recs = run_series_jobs(jobs, rec_dir / "series.jsonl", args.workers, since=args.since)
     vis_path = rec_dir / "visibility.jsonl"
@@ -843,6 +870,8 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
     body = series_section(recs, variants, vis, orc)
     nulls = _latest(rec_dir / "series_null.jsonl", args.since) + [
         r for r in _latest(rec_dir / "series.jsonl", args.since) if r["cause"] == "none"]
+    for extra in filter(None, args.harness.split(",")):
+        nulls += [r for r in harness_records(Path(extra)) if r["cause"] == "none"]
     if nulls:
         body += ("\n\n### Null series: false-cause rate with the shipped thresholds\n\n"
                  "Calibration nulls (`--calibrate --keep-thresholds`, seeds disjoint from the "
