@@ -881,6 +881,8 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
                  "false-cause rate.\n\n" + null_table(nulls))
     if args.note:
         body += "\n\n" + args.note
+    if args.note_file:
+        body += "\n\n" + Path(args.note_file).read_text().strip()
     write_section("diagnose_series", "Diagnosis on set-point series: one orbit vs 4 vs 8 "
                   "set-points, with and without the drive phase (`bench_diagnose.py --series`)",
                   body, info, write=not args.no_doc)
@@ -907,6 +909,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pairs", type=int, default=2,
                     help="series: draws per pair of effects (two effects at once)")
     ap.add_argument("--note", default="", help="series: a closing paragraph for the section")
+    ap.add_argument("--note-file", default="",
+                    help="series: a markdown file appended to the section (not echoed in "
+                         "the command line)")
     ap.add_argument("--report-only", action="store_true",
                     help="series: write the section from the records so far, run nothing")
     ap.add_argument("--causes", default="",
