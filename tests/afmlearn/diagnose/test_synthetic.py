@@ -174,3 +174,20 @@ def test_visibility_vanishes_with_the_effect_and_grows_with_it():
     assert effect_visibility(dataclasses.replace(case, causes=(), effects={}), **opts) == {}
     with pytest.raises(ValueError, match="n_harmonics"):
         effect_visibility(case, samples_per_period=100, n_harmonics=50)
+
+
+def test_diverged_rows_are_not_recordings(tmp_path, monkeypatch):
+    """A row far beyond the free amplitude (an integration failure that came out finite) is
+    refused and the draw redrawn; here every orbit counts as diverged (reach limit 0.1)."""
+    from afmlearn.diagnose import synthetic
+
+    case = draw_series_case(np.random.default_rng([7, 4]), causes="none", n_points=2)
+    opts = {"samples_per_period": 60, "n_periods": 6, "free_periods": 2}
+    simulate_series(case, tmp_path / "ok.h5", **opts)           # fine at the real limit
+    monkeypatch.setattr(synthetic, "_MAX_REACH", 0.1)
+    with pytest.raises(FloatingPointError, match="diverged"):
+        simulate_series(case, tmp_path / "bad.h5", **opts)
+    assert not (tmp_path / "bad.h5").exists()
+    with pytest.raises(RuntimeError, match="no tapping series"):
+        hidden_series(np.random.default_rng(0), tmp_path / "c.h5", causes="none", n_points=2,
+                      max_draws=2, **opts)
