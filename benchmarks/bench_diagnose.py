@@ -686,7 +686,12 @@ def series_calibrate(args: argparse.Namespace, settings: list[tuple[int, float]]
              "seed": args.seed, "periods": args.periods, "n_points": 8, "phase": True,
              "files": str(rec_dir / "series_null_files")}
             for i in range(args.null) for spp, noise in settings]
-    recs = run_series_jobs(jobs, rec_dir / "series_null.jsonl", args.workers, since=args.since)
+    if args.report_only:
+        have = {_series_key(r): r for r in _latest(rec_dir / "series_null.jsonl", args.since)}
+        recs = [have[_series_key(j)] for j in jobs if _series_key(j) in have]
+    else:
+        recs = run_series_jobs(jobs, rec_dir / "series_null.jsonl", args.workers,
+                               since=args.since)
     if args.keep_thresholds:
         return series_null_check(recs, rec_dir, args)
     ok = [r for r in recs if r.get("candidates")]
