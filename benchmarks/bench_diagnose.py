@@ -777,6 +777,11 @@ def harness_records(path: Path) -> list[dict]:
         if not line.strip():
             continue
         h = json.loads(line)
+        f = path.parent / "draws" / h.get("file", "")
+        if h.get("file") and f.exists():
+            y = read_trace(f)
+            if np.any(np.abs(y.deflection_m).max(axis=1) > 1.5 * y.free_amplitude_m):
+                continue        # a diverged row (the generator before f336ff8): not data
         r = {"set_id": 3, "spp": 200, "noise": 0.01, "cause": h["cause"], "index": h["index"],
              "seed": 2026, "periods": 30.0, "n_points": 8, "phase": True,
              "case": {"effects": h.get("effects") or {}}, "commit": commit + " (R)",
