@@ -89,11 +89,12 @@ def test_conservative_law_dissipates_nothing():
     # active only near contact, was named viscoelastic (measured confusion)
     pytest.param("long_range_damping", TRUTH.replace(damping=1e-3, decay_length=2.0), 0.0,
                  marks=pytest.mark.xfail(strict=True, reason=(
-                     "measured: named electrostatic. The baseline refined from the true "
-                     "surface and attraction reaches chi2 188 on 240 residuals (the damping "
-                     "is nearly invisible here) but the diagnoser's baseline stops at 514, "
-                     "and an electrostatic tail bridges more of that gap than the damping "
-                     "fit, which lands on a near-contact decay (docs/curves.md, Limits)"))),
+                     "measured: named none. The baseline refined from the true surface and "
+                     "attraction reaches chi2 188 on 240 residuals (the damping is nearly "
+                     "invisible here) but the diagnoser's baseline stops at 2468, with the "
+                     "drive frequency 9e-5 above that refit's: the far-field damping biases "
+                     "the free phase and the start grids hold the drive frequency fixed "
+                     "(docs/curves.md, Limits)"))),
     ("viscoelastic", TRUTH.replace(visco=2.0), 0.0),
 ])
 def test_diagnoser_names_the_hidden_cause(cause, law, drift):
