@@ -46,7 +46,8 @@ buffers around it) and the whole RK4 step with its force evaluations is inlined 
 reference counting on, numba increfs/decrefs the array arguments of every inlined call at every
 step, and an out-of-line RK4 step spent about a third of its time copying ~15 array structs
 onto the stack for the call; together they made a step ~1.6x slower. The rare switch location
-(:func:`_switch`) and the crossing solve past its quick reject (:func:`_crossing_solve`) stay
+(:func:`_switch`, which steps through :func:`_rk4_call`, an out-of-line copy that keeps the cold
+compile shorter) and the crossing solve past its quick reject (:func:`_crossing_solve`) stay
 out of line. Calls that are not inlined should take at most 30 arguments: CPython passes a call
 with more as ``*args`` and numba then builds a tuple of all of them at every call.
 
@@ -164,6 +165,15 @@ def _rk4(q, v, W, M, tau, h, cm, sm, c1, s1, r, mp, yb, om, g0, gr, kinds, p1, p
         Wn[j] = W[j] + h6 * (pa[j] + 2.0 * pk[0, j] + 2.0 * pk[1, j] + pk[2, j])
 
 
+@njit(cache=True, _nrt=False)
+def _rk4_call(q, v, W, M, tau, h, cm, sm, c1, s1, r, mp, yb, om, g0, gr, kinds, p1, p2, cf, a0,
+              geometric, a1, pa, qn, vn, Wn, wk, pk):
+    """:func:`_rk4` out of line, for the rare paths (:func:`_switch`, :func:`_graded_to_end`):
+    one more inlined copy of the step would only lengthen the cold compile."""
+    _rk4(q, v, W, M, tau, h, cm, sm, c1, s1, r, mp, yb, om, g0, gr, kinds, p1, p2, cf, a0,
+         geometric, a1, pa, qn, vn, Wn, wk, pk)
+
+
 @njit(cache=True, inline="always", _nrt=False)
 def _hermite(t, e0, e1, d0, d1):
     a = 2.0 * e0 + d0 - 2.0 * e1 + d1
@@ -263,8 +273,8 @@ def _graded_to_end(q, v, W, M, tau, length, hmin, r, mp, yb, om, g0, gr, th0, ki
         th1 = th0 + om * (tau + t + step)
         c1 = math.cos(th1)
         s1 = math.sin(th1)
-        _rk4(qg, vg, Wg, M, tau + t, step, math.cos(thm), math.sin(thm), c1, s1, r, mp, yb, om,
-             g0, gr, kinds, p1, p2, cf, a0, geometric, ag, pg, qe, ve, We, wk, pk)
+        _rk4_call(qg, vg, Wg, M, tau + t, step, math.cos(thm), math.sin(thm), c1, s1, r, mp, yb,
+                  om, g0, gr, kinds, p1, p2, cf, a0, geometric, ag, pg, qe, ve, We, wk, pk)
         t += step
         if step == d:
             return
@@ -296,8 +306,8 @@ def _switch(q, v, W, M, tau, hs, hh, zsw, hmin, r, r_new, mp, yb, om, g0, gr, th
                            cf, a0, geometric, a1, pa, qe, ve, We, qg, vg, Wg, ag, pg, wk, pk)
         else:
             thm = th0 + om * (tau + 0.5 * hs)
-            _rk4(q, v, W, M, tau, hs, math.cos(thm), math.sin(thm), c1e, s1e, r, mp, yb, om, g0,
-                 gr, kinds, p1, p2, cf, a0, geometric, a1, pa, qe, ve, We, wk, pk)
+            _rk4_call(q, v, W, M, tau, hs, math.cos(thm), math.sin(thm), c1e, s1e, r, mp, yb, om,
+                      g0, gr, kinds, p1, p2, cf, a0, geometric, a1, pa, qe, ve, We, wk, pk)
         ze, zde = _gap(qe, ve, M, tau + hs, c1e, s1e, yb, om, g0, gr)
         err = ze - zsw
         if abs(err) < 1e-14 or zde == 0.0:
