@@ -38,7 +38,7 @@ import math
 import os
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, final
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -266,6 +266,7 @@ def plot_spectrum(dg: Any, path: str | os.PathLike[str]) -> Path:
 
 
 # ---------------------------------------------------------------------- force vs gap
+@final
 class _Harmonics:
     """Duck-types PeriodicOrbit for ``DiagnosisModel.inverted_force`` with given harmonics."""
 

@@ -19,7 +19,7 @@ import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, final
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -36,6 +36,7 @@ _FORWARD, _REVERSE = "#1f77b4", "#d62728"
 
 
 # ---------------------------------------------------------------------------- data views
+@final
 @dataclass(frozen=True)
 class _Row:
     """One recording in SI units (what the figures need)."""
@@ -416,6 +417,7 @@ def _fig_force(r: _Row, periods: float) -> Figure:
 
 
 # ---------------------------------------------------------------------------- plot_sweep
+@final
 @dataclass(frozen=True)
 class _SweepRows:
     drive_hz: NDArray[np.float64]
