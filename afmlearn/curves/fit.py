@@ -47,6 +47,9 @@ PROFILE_STEP = 0.001
 #: 1e-4 of the drive frequency and the surface position (measured: with 1e-4 a no-effect
 #: baseline stops at 3.7x the truth's chi2 by xtol after 10 evaluations, with 1e-6 at 1.2x)
 DIFF_STEP = 1e-6
+#: how far (free amplitudes) the surface may lie beyond the closest piezo position when the
+#: amplitude never falls below 0.9 of free
+OUT_OF_REACH = 3.0
 #: half-width profiled around the baseline's first guess of the surface position
 COARSE_WINDOW = 0.15
 #: the baseline's coarse (vdw, stiffness) grid and the fine factors around its best when the
@@ -318,7 +321,11 @@ class CurveFitter:
         sel = app & (curve.amplitude > 0.2) & (curve.amplitude < 0.9)
         guess = (float(np.median(curve.z_piezo[sel] - curve.amplitude[sel])) if sel.any()
                  else float(np.min(curve.z_piezo[app])))
-        self._offset_bounds = (guess - 0.6, guess + 0.6)
+        # a curve whose amplitude never falls below 0.9 of free may not have met the surface at
+        # all: the surface may then stay out of reach (else the model's tip must touch within
+        # 0.6 free amplitudes and makes a dip the data do not have; A's flat Asylum curves)
+        reach = 0.6 if sel.any() else OUT_OF_REACH
+        self._offset_bounds = (guess - reach, guess + 0.6)
         if self.start is not None:
             x = [self.start.get(OFFSET, guess), self.start.get(OMEGA, self.model_.omega)]
             x += [_enc(p, self.start.get(p.field, p.init)) for p in params]
@@ -342,10 +349,14 @@ class CurveFitter:
             # each point costs one evaluation, not one per surface position: denser grids
             # (where the model jumps to the repulsive branch turns on ~20 % of attraction)
             offsets = (guess,)  # profiled over +-COARSE_WINDOW
+            if not sel.any():  # and a start whose closest rest gap keeps the tip clear
+                offsets = (guess, guess - 0.5 * OUT_OF_REACH)
             coarse, fine_scales = PROFILED_COARSE, PROFILED_FINE_SCALES
         else:
             offsets = (guess - 0.05, guess, guess + 0.05) if self.n_starts == 1 else \
                 tuple(guess + np.linspace(-0.1, 0.1, 5))
+            if not sel.any():
+                offsets += (guess - 0.5 * OUT_OF_REACH,)
         for off in offsets:
             for vdw in coarse[0]:
                 for e in coarse[1]:

@@ -22,8 +22,9 @@ Q = 60.0
 LENGTH = 20e-9
 
 
-def synthetic(law, *, seed=0, periods=600.0, n=240, drift=0.0, offset=0.3):
-    """A noisy approach--retract curve of ``law`` (1 % amplitude, 0.5 deg phase noise)."""
+def synthetic(law, *, seed=0, periods=600.0, n=240, drift=0.0, offset=0.3, noise=1.0):
+    """A noisy approach--retract curve of ``law`` (``noise`` x (1 % amplitude, 0.5 deg
+    phase noise))."""
     rate = 72e3 * n / (2 * periods)  # samples per second at f0 = 72 kHz
     tau = 2 * np.pi * 72e3 * np.arange(n) / rate
     half = tau[n // 2]
@@ -32,8 +33,8 @@ def synthetic(law, *, seed=0, periods=600.0, n=240, drift=0.0, offset=0.3):
     model = SlowFlowModel(quality_factor=Q, omega=1.0, drive=1.0 / Q, step=4 * np.pi)
     amp, phi = model.predict(law, tau, gap)
     rng = np.random.default_rng(seed)
-    amp = amp + 0.01 * rng.standard_normal(n)
-    phi = phi + math.radians(0.5) * rng.standard_normal(n)
+    amp = amp + 0.01 * noise * rng.standard_normal(n)
+    phi = phi + math.radians(0.5) * noise * rng.standard_normal(n)
     return Curve.from_si(amplitude_m=amp * LENGTH, phase_rad=phi,
                          z_piezo_m=(z_piezo + 1.0) * LENGTH,  # piezo origin unknown
                          segment=(tau >= half).astype(np.int8), sample_rate_hz=rate,
@@ -159,3 +160,14 @@ def test_profiled_surface_position_agrees_with_the_direct_cost():
     assert _linear_ramp(curve, curve.segment == 1) is None
     bent = dataclasses.replace(curve, z_piezo=curve.z_piezo - 0.5 * (curve.tau / curve.tau[-1])**2)
     assert _linear_ramp(bent, bent.segment == 0) is None
+
+
+def test_a_curve_that_never_meets_the_surface_is_fitted_without_contact():
+    # closest rest gap 1.3 free amplitudes: nothing happens; the surface must be allowed out
+    # of reach (it used to be held within 0.6 free amplitudes: a contact dip the data lack)
+    curve = synthetic(TRUTH, offset=-1.0, noise=0.1)  # 0.1 %: as A's flat Asylum curves
+    assert curve.amplitude.min() > 0.99
+    diag = CurveDiagnoser(a0_m=0.015 * LENGTH, max_evaluations=300).fit(curve)
+    n = diag.baseline_.n_fit_
+    assert diag.baseline_.chi2_ < 1.5 * n  # at the noise level
+    assert diag.cause_ == "none"
