@@ -28,6 +28,7 @@ from typing import Any
 import lightning.pytorch as pl
 import numpy as np
 import torch
+from hydra.errors import InstantiationException
 from hydra.utils import instantiate
 from lightning.pytorch.callbacks import Callback, ModelCheckpoint
 from omegaconf import DictConfig, OmegaConf
@@ -91,6 +92,18 @@ def _input_size(datamodule: pl.LightningDataModule) -> tuple[int, int]:
     datamodule.setup("fit")
     batch = next(iter(datamodule.train_dataloader()))
     return int(batch["x"].shape[-1]), int(batch["x"].shape[1])
+
+
+def _build(key: str, node: Any, **kwargs: Any) -> Any:
+    """``instantiate(node, **kwargs)``; a bad setting's ValueError, which Hydra wraps in an
+    InstantiationException, is raised again as a ValueError naming ``key`` (one line at the
+    entry point). Other errors pass unchanged."""
+    try:
+        return instantiate(node, **kwargs)
+    except InstantiationException as err:
+        if isinstance(err.__cause__, ValueError):
+            raise ValueError(f"{key}: {err.__cause__}") from err
+        raise
 
 
 def _atomic_write_text(path: Path, text: str) -> None:
@@ -228,11 +241,11 @@ def train(cfg: DictConfig, *, extra_callbacks: Sequence[Callback] = ()
     output_dir = Path(cfg.paths.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
 
-    datamodule = instantiate(cfg.data)
+    datamodule = _build("data", cfg.data)
     n_features, samples_per_period = _input_size(datamodule)
-    net = instantiate(cfg.model.net, input_size=n_features)
+    net = _build("model.net", cfg.model.net, input_size=n_features)
     module_cfg = OmegaConf.create({k: v for k, v in cfg.model.items() if k not in _MODEL_META})
-    model: OrbitModule = instantiate(module_cfg, net=net)
+    model: OrbitModule = _build("model", module_cfg, net=net)
     model.run_config = {
         "config": OmegaConf.to_container(cfg, resolve=True),
         "input_size": n_features,
