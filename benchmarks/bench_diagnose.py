@@ -820,6 +820,12 @@ def series_null_check(recs: list[dict], rec_dir: Path, args: argparse.Namespace)
                      f"series at 200 spp / 1 %, drive phase recorded, commits "
                      f"{_commits(main)}: {k} named a cause, one-sided 95 % upper bound on the "
                      f"family-wise false-cause rate {100 * upper_bound(k, len(main)):.1f} %")
+    dropped = sum(r["cause"] == "none" for n in ("series_null_invalid.jsonl",
+                                                   "series_invalid.jsonl")
+                  for r in _latest(rec_dir / n))
+    if dropped:
+        sec["source"] += (f" ({dropped} null series with a diverged simulated row, "
+                          f"|deflection| > 1.5 free amplitudes, left out)")
     if not args.no_doc:
         tmp = CALIBRATION.with_suffix(".json.tmp")
         tmp.write_text(json.dumps(d, indent=1) + "\n")
