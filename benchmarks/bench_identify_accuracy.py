@@ -623,7 +623,8 @@ of the best (`ExponentProfile`; for one set-point the folds are blocks of period
 traces. Force accuracy (design.md §4) pooled over the set-points used, in the series' unit.
 Goals (issue 12): exponent within ±0.1 with a 95 % interval ≤ 0.3 at 200 spp / 1 % with 8
 set-points; force ≥ 99 % whole, ≥ 97 % repulsive, ≥ 90 % near a0; one identification ≤ 60 s.
-Grid: {"reduced (see the rows)" if args.reduced else "full"}.
+Rows: the records present for the requested grid (one seed each; not every combination
+was run).
 
 {table}
 """
