@@ -810,6 +810,7 @@ def series_null_check(recs: list[dict], rec_dir: Path, args: argparse.Namespace)
         pool += [r for r in harness_records(Path(extra)) if r["cause"] == "none"]
     table = null_table(pool)
     print(table)
+    pool = list({_series_key(r): r for r in pool}.values())    # each draw once, latest
     main = [r for r in pool if r["n_points"] == 8 and r["phase"] and r["spp"] == 200]
     if not main:
         return 1
