@@ -72,7 +72,7 @@ def support_fit(problem: JointProblem, library: AFMLibrary, a0: float
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             c = des.optimizer().refit_gram(G, b, np.ones(G.shape[0], bool))[0]
-    except Exception:  # noqa: BLE001 - an infeasible corner of a search
+    except (ValueError, np.linalg.LinAlgError):  # an infeasible corner of a search
         return np.full(des.theta.shape[1], np.nan), math.inf, des
     r = des.y - des.theta @ c
     return c, float(r @ r) + problem.offset_penalty(), des
@@ -175,7 +175,7 @@ class NoiseScale:
                 warnings.simplefilter("ignore")
                 c = des.optimizer().refit_gram(G, des.theta.T @ des.y,
                                                np.ones(G.shape[0], bool))[0]
-        except Exception:  # noqa: BLE001 - keep the analytic whitening
+        except (ValueError, np.linalg.LinAlgError):  # keep the analytic whitening
             return problem
         r = des.y - des.theta @ c
         dof = max(des.y.size - G.shape[0], 1)
@@ -404,7 +404,7 @@ class Bagging:
             try:
                 out.append(opt.refit_gram(sum(Gb[i] for i in pick) + G0,
                                           sum(bb[i] for i in pick) + b0, supp)[0])
-            except Exception:  # noqa: BLE001 - an infeasible resample is skipped
+            except (ValueError, np.linalg.LinAlgError):  # an infeasible resample is skipped
                 continue
         return np.array(out) if out else np.empty((0, des.theta.shape[1]))
 

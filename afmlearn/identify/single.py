@@ -444,7 +444,7 @@ class OrbitRefinement:
             G, b = problem.gram(des)
             try:
                 c = problem.optimizer(des).refit_gram(G, b, np.ones(G.shape[0], bool))[0]
-            except Exception:  # noqa: BLE001 - infeasible corner of the search
+            except (ValueError, np.linalg.LinAlgError):  # infeasible corner of the search
                 return 1e300
             r = des.y - des.theta @ c
             return float(r @ r)

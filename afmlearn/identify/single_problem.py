@@ -239,7 +239,7 @@ class OrbitProblem:
         G, b = self.gram(des)
         try:
             c = self.optimizer(des).refit_gram(G, b, np.ones(G.shape[0], bool))[0]
-        except Exception:  # noqa: BLE001 - infeasible corner
+        except (ValueError, np.linalg.LinAlgError):  # infeasible corner
             return np.inf
         r = des.y - des.theta @ c
         return float(r @ r)

@@ -54,7 +54,7 @@ def cv_errors(opt: BoxSR3, theta: FloatArray, y: FloatArray,
             b += prior[1] * (f + 1) / nb
         try:
             c = opt.refit_gram(g, b, support)[0]
-        except Exception:  # noqa: BLE001 - infeasible support on a short fold
+        except (ValueError, np.linalg.LinAlgError):  # infeasible support on a short fold
             out[f] = np.inf
             continue
         v = f + 1
@@ -123,7 +123,7 @@ class ForwardSelection:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     return self.optimizer.refit_gram(G, b, supp)[0]
-            except Exception:  # noqa: BLE001 - infeasible support
+            except (ValueError, np.linalg.LinAlgError):  # infeasible support
                 return None
 
         def candidate(supp: NDArray[np.bool_], c: FloatArray) -> Candidate:
