@@ -23,26 +23,18 @@ import os
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import NullFormatter
 
 from afmlearn.curves import CurveDiagnoser
 from afmlearn.curves.dissipation import dissipated_energy
 from afmlearn.curves.hypotheses import BASELINE, EXTENSIONS
-from afmlearn.io._atomic import atomic_path
+from afmlearn.plots.trace import _save
 from afmlearn.preprocess.phase import wrap_angle
 
 __all__ = ["curve_residuals", "plot_curve_fit", "plot_curve_force", "plot_curve_dissipation",
            "curve_figures", "plot_parameter_spread", "spread_table"]
 
-
-def _save(fig: Figure, path: Path) -> Path:
-    FigureCanvasAgg(fig)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    return path
 
 
 def _fits(diag: CurveDiagnoser) -> dict:

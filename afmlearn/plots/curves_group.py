@@ -15,21 +15,13 @@ import os
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from afmlearn.curves.group_diagnose import GroupDiagnoser
-from afmlearn.io._atomic import atomic_path
+from afmlearn.plots.trace import _save
 
 __all__ = ["group_figures", "plot_group_fit", "plot_group_force"]
 
-
-def _save(fig: Figure, path: Path) -> Path:
-    FigureCanvasAgg(fig)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=100)
-    return path
 
 
 def plot_group_fit(diag: GroupDiagnoser, path: str | os.PathLike[str]) -> Path:
