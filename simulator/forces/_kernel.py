@@ -110,9 +110,14 @@ def term_value(kind: int, p1: float, p2: float, a0: float, z: float, zd: float, 
         Gap, gap rate ``dz/dtau`` and deflection (dimensionless).
     contact, attached : bool
         Regime flags.
+
+    Out of contact the distance terms read ``max(z, a0)``: the integrator's trial RK4 stages
+    can pass a contact switch it has not located yet, and there the free-side force must be
+    the continuous extension from the switch, not ``z**-n`` near ``z = 0`` (which threw the
+    tip through the sample: rows at 10--1e11 free amplitudes in spectroscopy series).
     """
     if kind == _INVERSE_POWER:
-        return inverse_pow(a0 if contact else z, p1)
+        return inverse_pow(a0 if contact or z < a0 else z, p1)
     if kind == _INDENTATION:
         return signed_pow(a0 - z, p1) if contact else 0.0
     if kind == _INDENTATION_RATE:
@@ -124,10 +129,10 @@ def term_value(kind: int, p1: float, p2: float, a0: float, z: float, zd: float, 
     if kind == _EXPONENTIAL_DAMPING:
         return math.exp(-z / p1) * zd
     if kind == _SPHERE_ELECTROSTATIC:
-        zz = a0 if contact else z
+        zz = a0 if contact or z < a0 else z
         return 1.0 / (zz * (zz + p1))
     if kind == _SPHERE_VDW:
-        zz = a0 if contact else z
+        zz = a0 if contact or z < a0 else z
         w = zz * (zz + 2.0 * p1)
         return 1.0 / (w * w)
     if kind == _CONTACT:
@@ -140,7 +145,7 @@ def term_value(kind: int, p1: float, p2: float, a0: float, z: float, zd: float, 
         if contact:
             return 0.0
         r = zd if p2 == 1.0 else zd * zd
-        return z ** p1 * r
+        return max(z, a0) ** p1 * r
     if kind == _JKR_CUBE:
         if not attached:
             return 0.0
@@ -153,7 +158,7 @@ def term_value(kind: int, p1: float, p2: float, a0: float, z: float, zd: float, 
         s = jkr_contact_radius_sqrt(a0 - z, p1, p2)
         return s * s * s
     if kind == _DETACHED_POWER:
-        return 0.0 if attached else inverse_pow(z, p1)
+        return 0.0 if attached else inverse_pow(max(z, a0), p1)
     if kind == _NECK:
         return (z - a0) / p1 if (attached and not contact and p1 > 0.0) else 0.0
     return math.nan
@@ -188,7 +193,7 @@ def law_force(kinds, p1, p2, coefs, a0: float, z: float, zd: float, x: float, co
             continue
         k = kinds[j]
         if k == _INVERSE_POWER:
-            f += c * inverse_pow(a0 if contact else z, p1[j])
+            f += c * inverse_pow(a0 if contact or z < a0 else z, p1[j])
         elif k == _INDENTATION:
             if contact:
                 f += c * signed_pow(a0 - z, p1[j])

@@ -25,7 +25,8 @@ from simulator.forces import (
     SphereVdW,
     ViscoelasticDMT,
 )
-from simulator.forces._kernel import law_force
+from simulator.forces._kernel import law_force, term_value
+from simulator.forces.law import Kind
 
 FORCE_UNIT = 4e-7  # k L_ref [N]
 CONTACT_MODELS = [n for n, m in FORCE_MODELS.items() if m.has_contact]
@@ -379,3 +380,22 @@ INVALID = [
 def test_invalid_parameters_raise_naming_the_parameter(param: str, build) -> None:
     with pytest.raises(ValueError, match=rf"^{param}\b"):
         build()
+
+
+@pytest.mark.parametrize("kind, p1", [(Kind.INVERSE_POWER, 2.0), (Kind.SPHERE_ELECTROSTATIC, 3.0),
+                                      (Kind.SPHERE_VDW, 1.5), (Kind.DETACHED_POWER, 2.0),
+                                      (Kind.GAP_RATE, -1.0)])
+def test_free_side_distance_terms_are_continued_past_the_contact_onset(kind, p1):
+    """A trial RK4 stage can pass a contact switch not located yet: out of contact a distance
+    term reads max(z, a0) there (bounded, continuous at a0), never z**-n near z = 0, which
+    threw the tip through the sample in spectroscopy rows."""
+    a0, zd = 0.025, -0.3
+    at_a0 = term_value(int(kind), p1, 0.0, a0, a0, zd, 0.0, False, False)
+    for z in (0.02, 1e-6, -0.01):
+        assert term_value(int(kind), p1, 0.0, a0, z, zd, 0.0, False, False) == at_a0
+    above = term_value(int(kind), p1, 0.0, a0, 2 * a0, zd, 0.0, False, False)
+    assert math.isfinite(above) and above != at_a0  # the free side itself is unchanged
+    kinds = np.array([int(Kind.INVERSE_POWER)])
+    one = np.ones(1)
+    assert law_force(kinds, 2 * one, 0 * one, -one, a0, -0.01, zd, 0.0, False, False) == \
+        -(a0 ** -2.0)

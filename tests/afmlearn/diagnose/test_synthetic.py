@@ -191,3 +191,22 @@ def test_diverged_rows_are_not_recordings(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError, match="no tapping series"):
         hidden_series(np.random.default_rng(0), tmp_path / "c.h5", causes="none", n_points=2,
                       max_draws=2, **opts)
+
+
+def test_a_row_that_passed_the_contact_onset_in_a_trial_stage_stays_bounded():
+    """Regression (a null DMT row at 200 samples/period, one RK4 step per sample): a trial
+    stage landed near z = 0 out of contact, z**-2 threw the tip 17.5 free amplitudes into the
+    sample. The same row at 100 samples/period (the same step, two per sample) was fine; now
+    both agree."""
+    from afmlearn.diagnose.synthetic import _simulate_series
+
+    d = {"cause": "none", "causes": [], "quality_factor": 270.3202241651758,
+         "free_amplitude_m": 1.956404350728376e-08, "setpoints": [0.4811723729555547],
+         "settle_offsets": [0.4451330047688712], "tip_radius_m": 1.486962136572616e-08,
+         "hamaker_j": 1.3847995592748072e-19, "reduced_modulus_pa": 1016297364.7227466,
+         "a0_m": 2.479367021601547e-10, "effects": {}, "seed": 1284272152}
+    case = SeriesCase.from_dict(d)
+    rows = [_simulate_series(case, samples_per_period=spp, n_periods=5, noise_level=0.0,
+                             free_periods=1, min_tapping=0).deflection_m[0] for spp in (200, 100)]
+    reach = [float(np.max(np.abs(r))) / case.free_amplitude_m for r in rows]
+    assert reach[0] < 1.0 and reach[0] == pytest.approx(reach[1], rel=1e-6)
