@@ -148,17 +148,31 @@ def analyze_curve(trace: str | os.PathLike[str], out_dir: str | os.PathLike[str]
         diag.lockin = lockin
     diag.fit(curve)
     report = diag.report() if build is None else build(diag)
-    report["curve"].update(spring_constant_n_per_m=curve.spring_constant_n_per_m,
-                           resonance_frequency_hz=curve.resonance_frequency_hz,
-                           quality_factor=curve.quality_factor)
+    path = _write_report(report, report["curve"], curve, diag, out_dir, figures=figures,
+                         inputs=Path(trace).name, filename=filename)
+    log.info("%s: %s written", Path(trace).name, path)
+    return report
+
+
+def _write_report(report: dict[str, Any], section: dict[str, Any], curve: Any, diag: Any,
+                  out_dir: str | os.PathLike[str], *, figures: Callable[..., Any] | None,
+                  inputs: Any, filename: str) -> Path:
+    """Complete a curve or group report and write it (the one writer of both analyses).
+
+    ``section`` (``report["curve"]`` or ``report["group"]``) receives the lever's k [N/m],
+    f0 [Hz] and Q from ``curve``; ``figures(diag, out_dir)`` paths are stored relative to
+    ``out_dir``; ``inputs`` (file name or names) under ``"input"``. Returns the JSON path.
+    """
+    section.update(spring_constant_n_per_m=curve.spring_constant_n_per_m,
+                   resonance_frequency_hz=curve.resonance_frequency_hz,
+                   quality_factor=curve.quality_factor)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if figures is not None:
         report["figures"] = [os.path.relpath(f, out) for f in figures(diag, out)]
-    report["input"] = Path(trace).name
+    report["input"] = inputs
     write_json(out / filename, report)
-    log.info("%s: %s written", Path(trace).name, out / filename)
-    return report
+    return out / filename
 
 
 def analyze_folder(folder: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,

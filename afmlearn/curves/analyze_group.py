@@ -21,7 +21,7 @@ import numpy as np
 
 from afmlearn.io import write_json
 
-from .analyze import _run_limited, load_curve
+from .analyze import _run_limited, _write_report, load_curve
 from .group_diagnose import GroupDiagnoser
 
 __all__ = ["analyze_folder_joint", "analyze_group", "split_sets"]
@@ -70,17 +70,9 @@ def analyze_group(files: Sequence[str | os.PathLike[str]], out_dir: str | os.Pat
     report = diag.report()
     for p, row in zip(paths, report["group"]["curves"], strict=True):
         row["file"] = p.name
-    c0 = curves[0]
-    report["group"].update(spring_constant_n_per_m=c0.spring_constant_n_per_m,
-                           resonance_frequency_hz=c0.resonance_frequency_hz,
-                           quality_factor=c0.quality_factor)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    if figures is not None:
-        report["figures"] = [os.path.relpath(f, out) for f in figures(diag, out)]
-    report["input"] = [p.name for p in paths]
-    write_json(out / filename, report)
-    log.info("group of %d curves: %s written", len(paths), out / filename)
+    path = _write_report(report, report["group"], curves[0], diag, out_dir, figures=figures,
+                         inputs=[p.name for p in paths], filename=filename)
+    log.info("group of %d curves: %s written", len(paths), path)
     return report
 
 
