@@ -6,6 +6,21 @@ its own rest gap (known) and drive phase ``phi_i`` (a nuisance: fitted, with a G
 when the file records it). The whitened rows of every observation (:class:`HarmonicBalance`,
 each in units of its own orbit noise) are stacked and solved together; the calibration priors
 enter once, the phase priors once per observation.
+
+Several free amplitudes. Observations recorded at different free amplitudes (files of one tip
+combined) were driven with different amplitudes: each *drive group* (:func:`~afmlearn.
+diagnose.observation.drive_groups`) has its own ``B``, still a linear coefficient of the
+variable projection, with its own calibration prior ``B_g = F_c,g``. The coefficient vector
+keeps the one-group layout and appends the other groups' drives::
+
+    coef = [K, D, B_0, c_1 .. c_m, B_1 .. B_{G-1}]
+
+so code that reads ``coef[:3]`` and the force coefficients ``coef[3:3 + m]`` is unchanged,
+and one group is exactly today's problem. :meth:`JointBalance.observation_coef` gives the
+one-observation layout ``[K, D, B_g, c]`` of any observation. A subset (held-out fold) keeps
+every group's column: a group with no observation left in it is held at its calibration prior
+(its ``F_c``; with no free data at the value it starts from), which is how a whole held-out
+free amplitude is predicted.
 """
 
 from __future__ import annotations
@@ -19,7 +34,7 @@ from numpy.typing import NDArray
 
 from afmlearn.preprocess.phase import wrap_angle
 
-from .balance import HarmonicBalance, Solution, bounded_lstsq
+from .balance import N_LEVER, HarmonicBalance, Solution, bounded_lstsq
 from .spec import ModelSpec
 
 __all__ = ["JointBalance", "PhasePrior", "wrap"]
@@ -40,16 +55,34 @@ class JointBalance:
     Parameters
     ----------
     balances : sequence of HarmonicBalance
-        One per observation (same calibration: ``Q`` and drive amplitude).
+        One per observation (same calibration ``Q``; within a drive group the same drive
+        amplitude ``F_c``, its orbits' ``drive_amplitude``).
     phase_priors : sequence of PhasePrior or None
         Per observation: the recorded drive phase and its standard deviation, or None.
+    groups : sequence of int, optional
+        Drive group of each observation, integers ``0 .. G-1`` each used at least once
+        (:func:`~afmlearn.diagnose.observation.drive_groups`); default: one group (one
+        ``B`` for every observation, as before several free amplitudes were fitted).
     """
 
     def __init__(self, balances: Sequence[HarmonicBalance],
-                 phase_priors: Sequence[PhasePrior | None]) -> None:
+                 phase_priors: Sequence[PhasePrior | None], *,
+                 groups: Sequence[int] | None = None) -> None:
         assert len(balances) == len(phase_priors) and len(balances) > 0
         self.balances = list(balances)
         self.phase_priors = list(phase_priors)
+        if groups is None:
+            groups = [0] * len(self.balances)
+        groups = [int(g) for g in groups]
+        if len(groups) != len(self.balances) or sorted(set(groups)) != list(
+                range(max(groups) + 1)):
+            raise ValueError(f"groups must give each of the {len(self.balances)} observations "
+                             f"a group 0 .. G-1, each used, got {groups!r}")
+        self.groups = groups
+        #: each group's calibrated drive amplitude F_c [k L_ref] (None: not calibrated)
+        self.group_drives: list[float | None] = [
+            self.balances[groups.index(g)].orbit.drive_amplitude
+            for g in range(max(groups) + 1)]
         #: structures rejected so far because their columns were not finite on the orbits
         #: (:func:`~afmlearn.diagnose.balance.bounded_lstsq`; chi2 inf)
         self.n_rejected = 0
@@ -58,10 +91,52 @@ class JointBalance:
     def n_obs(self) -> int:
         return len(self.balances)
 
+    @property
+    def n_groups(self) -> int:
+        return len(self.group_drives)
+
     def subset(self, indices: Sequence[int]) -> JointBalance:
-        """The joint balance of some observations (for held-out folds)."""
-        return JointBalance([self.balances[i] for i in indices],
-                            [self.phase_priors[i] for i in indices])
+        """The joint balance of some observations (for held-out folds), in the same
+        coefficient layout: every drive group keeps its column and its calibration."""
+        out = JointBalance([self.balances[i] for i in indices],
+                           [self.phase_priors[i] for i in indices])
+        out.groups = [self.groups[i] for i in indices]
+        out.group_drives = list(self.group_drives)
+        return out
+
+    # ------------------------------------------------------------------ drive groups
+    def drive_index(self, i: int, spec: ModelSpec) -> int:
+        """Index in ``coef`` of observation ``i``'s drive amplitude ``B``."""
+        g = self.groups[i]
+        return 2 if g == 0 else N_LEVER + spec.n_force + g - 1
+
+    def observation_coef(self, i: int, spec: ModelSpec, coef: FloatArray) -> FloatArray:
+        """``[K, D, B_g, c_1..c_m]`` of observation ``i`` from the joint ``coef``."""
+        coef = np.asarray(coef, float)
+        p = N_LEVER + spec.n_force
+        if self.n_groups == 1:
+            return coef[:p] if coef.size != p else coef
+        out = np.array(coef[:p], float)
+        out[2] = coef[self.drive_index(i, spec)]
+        return out
+
+    def _group_design(self, i: int, spec: ModelSpec, A: FloatArray) -> FloatArray:
+        """Observation ``i``'s design with its drive column moved to its group's."""
+        if self.n_groups == 1:
+            return A
+        out = np.zeros((A.shape[0], A.shape[1] + self.n_groups - 1))
+        out[:, : A.shape[1]] = A
+        j = self.drive_index(i, spec)
+        if j != 2:
+            out[:, j] = A[:, 2]
+            out[:, 2] = 0.0
+        return out
+
+    def _drive_box(self, g: int, hb: HarmonicBalance) -> tuple[float, float]:
+        fc = self.group_drives[g]
+        if fc is not None and fc > 0:
+            return fc * (1 - hb.box_rel), fc * (1 + hb.box_rel)
+        return 0.0, math.inf
 
     def phase_residual(self, phases: Sequence[float]) -> FloatArray:
         """Prior rows of the recorded phases, ``(phi_i - mean_i) / sd_i`` (wrapped)."""
@@ -70,10 +145,38 @@ class JointBalance:
         return np.asarray(out, float)
 
     def bounds(self, spec: ModelSpec) -> tuple[FloatArray, FloatArray]:
-        return self.balances[0].bounds(spec)
+        """Boxes of the joint ``coef`` (:meth:`HarmonicBalance.bounds`, one drive box per
+        group around its ``F_c``)."""
+        hb = self.balances[0]
+        lo, hi = hb.bounds(spec)
+        if self.n_groups == 1:
+            return lo, hi
+        boxes = [self._drive_box(g, hb) for g in range(self.n_groups)]
+        lo[2], hi[2] = boxes[0]
+        lo = np.concatenate([lo, [b[0] for b in boxes[1:]]])
+        hi = np.concatenate([hi, [b[1] for b in boxes[1:]]])
+        return lo, hi
+
+    def prior_rows(self, p: int) -> tuple[FloatArray, FloatArray]:
+        """Calibration-prior rows of the joint ``coef`` (``p`` columns): ``K``, ``D`` and one
+        ``B_g = F_c,g`` row per calibrated group (sigma units)."""
+        hb = self.balances[0]
+        if self.n_groups == 1:
+            return hb.prior_rows(p)
+        P, t = hb.prior_rows(p)
+        rows, targets = [P[0], P[1]], [t[0], t[1]]
+        m = p - (self.n_groups - 1)             # the one-group layout's size
+        for g, fc in enumerate(self.group_drives):
+            if fc is not None and fc > 0:
+                j = 2 if g == 0 else m + g - 1
+                rows.append(np.eye(p)[j] / (hb.prior_rel * fc))
+                targets.append(1.0 / hb.prior_rel)
+        return np.array(rows), np.array(targets)
 
     def prior_residual(self, coef: FloatArray) -> FloatArray:
-        return self.balances[0].prior_residual(coef)
+        """The calibration-prior rows of the residual for the joint ``coef``."""
+        P, t = self.prior_rows(coef.size)
+        return P @ coef - t
 
     def solve(self, spec: ModelSpec, phases: Sequence[float],
               values: tuple[float, ...] = (), *, project: int = 0) -> Solution:
@@ -92,10 +195,10 @@ class JointBalance:
             sol = self.solve(spec, phases, values)
             phases = [self.best_phase(i, spec, sol.coef, ph) for i, ph in enumerate(phases)]
         blocks = [hb.design(spec, ph) for hb, ph in zip(self.balances, phases, strict=True)]
-        A = np.vstack([a for a, _ in blocks])
+        A = np.vstack([self._group_design(i, spec, a) for i, (a, _) in enumerate(blocks)])
         b = np.concatenate([bb for _, bb in blocks])
         lo, hi = self.bounds(spec)
-        coef, r = bounded_lstsq(A, b, *self.balances[0].prior_rows(A.shape[1]), lo, hi)
+        coef, r = bounded_lstsq(A, b, *self.prior_rows(A.shape[1]), lo, hi)
         if not np.all(np.isfinite(r)):
             self.n_rejected += 1
         r = np.concatenate([r, self.phase_residual(phases)])
@@ -107,6 +210,7 @@ class JointBalance:
         fixed coefficients: ``|u - B (cos phi w1 + sin phi w2)|^2``, a trigonometric
         function of one angle (grid of 64, then Newton steps from the best grid point)."""
         A0, b, w1, w2 = self.balances[i].parts(spec)
+        coef = self.observation_coef(i, spec, coef)
         u = A0 @ coef - b
         B = float(coef[2])
         a, bb = float(u @ w1), float(u @ w2)

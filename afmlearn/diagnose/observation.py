@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, final
@@ -22,13 +23,14 @@ from typing import Any, Literal, final
 import numpy as np
 from numpy.typing import NDArray
 
-from afmlearn.io import Trace
+from afmlearn.io import Experiment, Trace
 from afmlearn.preprocess import Calibrated, calibrate, check_trace
 from simulator import Scales
 
 from .joint import PhasePrior
 
-__all__ = ["Observation", "build_observations", "as_traces", "folds"]
+__all__ = ["Observation", "build_observations", "as_traces", "folds", "drive_groups",
+           "read_experiment"]
 
 FloatArray = NDArray[np.float64]
 
@@ -116,6 +118,37 @@ def as_traces(data: Any, row: int | None = None) -> list[Trace]:
             return out
     raise ValueError(f"data must be an afmlearn.io.Experiment, a Trace or a list of 1-D "
                      f"Traces, got {type(data).__name__}")
+
+
+def read_experiment(paths: Sequence[str | os.PathLike[str]]) -> Experiment:
+    """One experiment from several trace files of one tip (e.g. set-point series recorded at
+    two free amplitudes): every row of every file, in order; ``/labels`` is never opened.
+
+    Parameters
+    ----------
+    paths : sequence of str or os.PathLike
+        At least one trace file (format v1, or an instrument file); no sweep (its rows are
+        different drive frequencies: diagnosed one row at a time).
+
+    Raises
+    ------
+    ValueError
+        No path, a sweep, or files that do not share the cantilever's calibration (the
+        message names the field); afmlearn.io.TraceFormatError for a file that is not a trace.
+    """
+    if isinstance(paths, (str, os.PathLike)) or not len(paths):
+        raise ValueError(f"trace must be a non-empty list of trace files, got {paths!r}")
+    rows: list[Trace] = []
+    for p in paths:
+        exp = Experiment.read(p)                 # labels=False: /labels never opened
+        if exp.kind == "sweep":
+            raise ValueError(f"trace: {os.fspath(p)} is a frequency sweep; its rows are "
+                             f"diagnosed one at a time (one file and row=...)")
+        rows += list(exp)
+    try:
+        return Experiment(rows)
+    except ValueError as err:
+        raise ValueError(f"trace: the files are not one cantilever's: {err}") from None
 
 
 def _check_shared(traces: Sequence[Trace]) -> None:
@@ -216,6 +249,65 @@ def _windows(i: int, t: Trace, c: Calibrated, prior: PhasePrior | None, window_p
         s, e = int(k * w), int((k + 1) * w)
         out.append(Observation(i, "ramp_window", c, s, e, float(np.mean(gap[s:e])), prior, t))
     return out
+
+
+def drive_groups(observations: Sequence[Observation], *, rel_tol: float = 1e-6
+                 ) -> tuple[list[int], list[float | None]]:
+    """Which observations share one drive amplitude ``B``, and each group's calibrated ``F_c``.
+
+    Observations whose calibrated drive amplitudes (``cal.drive_amplitude``, k L_ref, from
+    each record's free data) agree within ``rel_tol`` form one group: the rows of one
+    set-point file and the windows of one ramp share their free record, so they share their
+    ``F_c`` exactly; files recorded at different free amplitudes differ by their ratio.
+    Observations without free data (``F_c`` None) join the single group when there is only
+    one, else form a group of their own (its drive is then constrained by no calibration).
+
+    Parameters
+    ----------
+    observations : sequence of Observation
+        In the experiment's common units (:func:`build_observations`).
+    rel_tol : float
+        Relative tolerance of "the same" ``F_c``, > 0.
+
+    Returns
+    -------
+    groups : list of int, length n_obs
+        Group of each observation, numbered by first appearance (the first observation's
+        group is 0).
+    drives : list of float or None, length n_groups
+        Each group's ``F_c`` [k L_ref]: the median of its members' (None: no free data).
+    """
+    if not rel_tol > 0:
+        raise ValueError(f"rel_tol must be > 0, got {rel_tol!r}")
+    fcs = [o.cal.drive_amplitude for o in observations]
+    keys: list[float] = []          # one representative F_c per calibrated group
+    member: list[int | None] = []
+    for fc in fcs:
+        if fc is None:
+            member.append(None)
+            continue
+        for k, ref in enumerate(keys):
+            if math.isclose(fc, ref, rel_tol=rel_tol):
+                member.append(k)
+                break
+        else:
+            keys.append(float(fc))
+            member.append(len(keys) - 1)
+    if len(keys) <= 1:
+        # today's single drive: every observation, the median of the known F_c
+        known = [float(fc) for fc in fcs if fc is not None]
+        return [0] * len(fcs), [float(np.median(known)) if known else None]
+    labels = ["none" if m is None else m for m in member]
+    order: dict[int | str, int] = {}
+    for lab in labels:
+        order.setdefault(lab, len(order))
+    groups = [order[lab] for lab in labels]
+    drives: list[float | None] = [None] * len(order)
+    for lab, g in order.items():
+        if lab != "none":
+            drives[g] = float(np.median([fc for fc, m in zip(fcs, member, strict=True)
+                                         if m == lab]))
+    return groups, drives
 
 
 def folds(gaps: Sequence[float], max_folds: int) -> list[list[int]]:

@@ -224,11 +224,13 @@ class OutputError:
 
     def model(self, i: int, spec: ModelSpec, coef: FloatArray, phase: float = 0.0
               ) -> DiagnosisModel:
-        """The model at observation ``i`` (its gap and drive frequency) with drive ``phase``."""
+        """The model at observation ``i`` (its gap, drive frequency and its drive group's
+        amplitude ``B``; ``coef`` the joint vector, :mod:`~afmlearn.diagnose.joint`) with
+        drive ``phase``."""
         o = self._orbits[i]
         return DiagnosisModel(spec=spec.replace(drive_phase=float(phase)),
-                              coef=np.asarray(coef, float), omega=o.omega, gap=o.gap,
-                              scales=self.scales)
+                              coef=self.jb.observation_coef(i, spec, coef), omega=o.omega,
+                              gap=o.gap, scales=self.scales)
 
     def start(self, i: int, model0: DiagnosisModel) -> tuple[FloatArray, bool]:
         """Shooting start for the phase-0 model at observation ``i``: the last converged

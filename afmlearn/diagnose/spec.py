@@ -126,9 +126,13 @@ class ModelSpec:
 
     def embed(self, spec: ModelSpec, coef: FloatArray) -> FloatArray:
         """``coef = [K, D, B, c..]`` of a nested ``spec`` placed into this spec's layout (the
-        columns this spec adds start at zero)."""
-        out = np.zeros(3 + self.n_force)
+        columns this spec adds start at zero). The drive amplitudes of further drive groups,
+        after the force coefficients (:mod:`~afmlearn.diagnose.joint`), are carried over."""
+        coef = np.asarray(coef, float)
+        extra = coef[3 + spec.n_force:]
+        out = np.zeros(3 + self.n_force + extra.size)
         out[:3] = coef[:3]
+        out[3 + self.n_force:] = extra
         mine = self.term_keys()
         for j, key in enumerate(spec.term_keys()):
             out[3 + mine.index(key)] = coef[3 + j]
