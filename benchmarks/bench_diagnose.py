@@ -702,15 +702,31 @@ def series_calibrate(args: argparse.Namespace, settings: list[tuple[int, float]]
     n_false = sum(any(c["delta_chi2"] > calib.thresholds[c["cause"]] for c in r["candidates"])
                   for r in ok)
     n_named = sum(r["cause_found"] != "none" for r in ok)
-    upper = 1.0 - 0.05 ** (1.0 / len(ok))
+    idx = sorted(r["index"] for r in ok)
     src = (calib.source.replace("null traces", "null 8-set-point series (drive phase "
                                 "recorded)")
-           + f"; {len(recs) - len(ok)} raised; {n_false}/{len(ok)} null series with a "
-           f"chi2 drop above these thresholds (in-sample), {n_named}/{len(ok)} with a cause "
-           f"named (drop and held-out gain); with 0 of n named, the one-sided 95 % upper "
-           f"bound on the family-wise false-cause rate is {100 * upper:.1f} %")
+           + f"; {args.periods:g} periods per set-point; seeds: set_id 5, seed {args.seed}, "
+           f"draws {idx[0]}-{idx[-1]}; commits {_commits(ok)}; {len(recs) - len(ok)} raised; "
+           f"{n_false}/{len(ok)} null series with a chi2 drop above these thresholds "
+           f"(in-sample), {n_named}/{len(ok)} with a cause named (drop and held-out gain); "
+           f"one-sided 95 % upper bound on the family-wise false-cause rate from these "
+           f"(in-sample) {100 * upper_bound(n_named, len(ok)):.1f} %")
     d = json.loads(CALIBRATION.read_text())
-    d["series"] = {"thresholds": calib.thresholds, "min_gain": calib.min_gain, "source": src}
+    old = d.get("series", {})
+    commits = sorted({r.get("commit", "?") for r in ok})
+    prev = old.get("thresholds")
+    if old.get("provenance", {}).get("commits") == commits:    # a re-write of the same run
+        prev = old["provenance"].get("previous_thresholds")
+    d["series"] = {"thresholds": calib.thresholds, "min_gain": calib.min_gain, "source": src,
+                   "provenance": {
+                       "commits": commits,
+                       "n_null_series": len(ok), "set_id": 5, "seed": args.seed,
+                       "draws": [idx[0], idx[-1]],
+                       "samples_per_period_noise": sorted({(r["spp"], r["noise"])
+                                                           for r in ok}),
+                       "periods_per_setpoint": args.periods, "n_points": 8,
+                       "drive_phase": True, "family_rate": args.family_rate,
+                       "previous_thresholds": prev}}
     if not args.no_doc:
         tmp = CALIBRATION.with_suffix(".json.tmp")
         tmp.write_text(json.dumps(d, indent=1) + "\n")

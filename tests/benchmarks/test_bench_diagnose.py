@@ -1,0 +1,44 @@
+"""The diagnosis benchmark's statistics on cases with a known answer: the null-calibrated
+thresholds (empirical quantile, floored at the chi-square point) and the one-sided
+Clopper--Pearson bound of the null check."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_diagnose import calibrate, upper_bound  # noqa: E402
+
+
+def _null(drops: dict[str, float]) -> dict:
+    return {"spp": 200, "noise": 0.01,
+            "candidates": [{"cause": c, "delta_chi2": d} for c, d in drops.items()]}
+
+
+def test_threshold_is_the_null_quantile_or_the_chi2_point():
+    # 101 nulls, higher_mode drops 0..100: at level 0.7 / 7 = 0.1 the 0.9 quantile is 90
+    # exactly; the other causes never drop, so they sit at their chi-square 0.9 points
+    recs = [_null({"higher_mode": float(i), "viscoelastic": 0.0, "long_range_damping": 0.0,
+                   "contact_geometry": 0.0, "adhesion_hysteresis": 0.0, "electrostatic": 0.0,
+                   "detector_nonlinearity": 0.0}) for i in range(101)]
+    cal = calibrate(recs, family_rate=0.7)
+    assert cal.thresholds["higher_mode"] == pytest.approx(90.0)
+    assert cal.thresholds["viscoelastic"] == pytest.approx(2.71, abs=0.005)       # 1 dof
+    assert cal.thresholds["long_range_damping"] == pytest.approx(4.61, abs=0.005)  # 2 dof
+    assert cal.thresholds["contact_geometry"] == pytest.approx(2.71, abs=0.005)
+    assert "101 null traces" in cal.source
+
+
+def test_one_sided_bound_with_no_false_cause_is_the_rule_of_three_exact_form():
+    # 0 of n: the bound solves (1 - p)^n = 0.05
+    for n in (20, 30, 40):
+        assert upper_bound(0, n) == pytest.approx(1 - 0.05 ** (1 / n), rel=1e-9)
+    assert upper_bound(0, 40) == pytest.approx(0.072, abs=5e-4)
+    assert upper_bound(3, 3) == 1.0
+    # more false causes in the same number of nulls: a larger bound
+    assert upper_bound(0, 30) < upper_bound(1, 30) < upper_bound(2, 30)
