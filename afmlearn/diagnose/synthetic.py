@@ -48,7 +48,7 @@ from simulator.sensor import DetectorNonlinearity, GaussianNoise
 
 __all__ = ["CAUSES", "EFFECT_CAUSES", "EFFECT_PAIRS", "Case", "SeriesCase", "draw_case",
            "simulate_case", "hidden_trace", "draw_series_case", "simulate_series",
-           "hidden_series", "effect_visibility"]
+           "hidden_series", "series_files", "effect_visibility"]
 
 #: the cause vocabulary of design.md section 3 (``none`` first)
 CAUSES: tuple[str, ...] = ("none", "higher_mode", "viscoelastic", "long_range_damping",
@@ -366,6 +366,10 @@ class SeriesCase:
         Per cause, the effect's own parameters.
     seed : int
         Seed of the sensor noise.
+    free_amplitudes_m : tuple of float
+        Free amplitude of each row [m] for an experiment at several free amplitudes (one
+        file per free amplitude, :func:`simulate_series`); empty: every row at
+        ``free_amplitude_m`` (then the first, smallest, free amplitude).
     """
 
     causes: tuple[str, ...]
@@ -379,6 +383,7 @@ class SeriesCase:
     a0_m: float
     effects: dict[str, dict[str, float]] = field(default_factory=dict)
     seed: int = 0
+    free_amplitudes_m: tuple[float, ...] = ()
 
     @property
     def cause(self) -> str:
@@ -386,9 +391,30 @@ class SeriesCase:
         return "+".join(self.causes) if self.causes else "none"
 
     @property
+    def row_amplitudes_m(self) -> FloatArray:
+        """Free amplitude of each row [m], shape (n_points,)."""
+        if self.free_amplitudes_m:
+            return np.asarray(self.free_amplitudes_m, float)
+        return np.full(len(self.setpoints), self.free_amplitude_m)
+
+    @property
+    def amplitudes_m(self) -> tuple[float, ...]:
+        """The distinct free amplitudes [m], in row order (one file each)."""
+        return tuple(dict.fromkeys(float(a) for a in self.row_amplitudes_m))
+
+    @property
     def gaps_m(self) -> FloatArray:
         """Rest gap of each row [m], shape (n_points,)."""
-        return np.asarray(self.setpoints) * self.free_amplitude_m
+        return np.asarray(self.setpoints) * self.row_amplitudes_m
+
+    def one_amplitude(self) -> SeriesCase:
+        """The same draw recorded at one free amplitude: every row at the first
+        (``free_amplitude_m``), same set-points, drive phases, noise seeds, tip and law.
+
+        Its rows at the first amplitude are the same records as this case's (for comparing
+        a two-amplitude experiment with a one-amplitude one of as many set-points).
+        """
+        return SeriesCase(**{**self.__dict__, "free_amplitudes_m": ()})
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> SeriesCase:
@@ -400,16 +426,20 @@ class SeriesCase:
                    tip_radius_m=float(d["tip_radius_m"]), hamaker_j=float(d["hamaker_j"]),
                    reduced_modulus_pa=float(d["reduced_modulus_pa"]), a0_m=float(d["a0_m"]),
                    effects={k: dict(v) for k, v in d["effects"].items()},
-                   seed=int(d["seed"]))
+                   seed=int(d["seed"]),
+                   free_amplitudes_m=tuple(float(v) for v in d.get("free_amplitudes_m", ())))
 
     def to_dict(self) -> dict[str, Any]:
-        return {"cause": self.cause, "causes": list(self.causes),
+        out: dict[str, Any] = {"cause": self.cause, "causes": list(self.causes),
                 "quality_factor": self.quality_factor,
                 "free_amplitude_m": self.free_amplitude_m, "setpoints": list(self.setpoints),
                 "settle_offsets": list(self.settle_offsets), "tip_radius_m": self.tip_radius_m,
                 "hamaker_j": self.hamaker_j, "reduced_modulus_pa": self.reduced_modulus_pa,
                 "a0_m": self.a0_m, "effects": {k: dict(v) for k, v in self.effects.items()},
                 "seed": self.seed}
+        if self.free_amplitudes_m:
+            out["free_amplitudes_m"] = list(self.free_amplitudes_m)
+        return out
 
 
 def _as_causes(causes: str | tuple[str, ...] | list[str]) -> tuple[str, ...]:
@@ -427,7 +457,7 @@ def _as_causes(causes: str | tuple[str, ...] | list[str]) -> tuple[str, ...]:
 
 def draw_series_case(rng: np.random.Generator, *,
                      causes: str | tuple[str, ...] | None = None, n_points: int = 8,
-                     two_effect_share: float = 0.25) -> SeriesCase:
+                     two_effect_share: float = 0.25, free_amplitudes: int = 1) -> SeriesCase:
     """Draw a set-point series: the hidden effects and every parameter.
 
     Parameters
@@ -444,9 +474,25 @@ def draw_series_case(rng: np.random.Generator, *,
         jitter of a quarter step.
     two_effect_share : float
         In [0, 1]; see ``causes``.
+    free_amplitudes : {1, 2}
+        1: one free amplitude, log-uniform in 12 - 40 nm (the draws of a seed are those of
+        the one-amplitude generator). 2: an experiment at two free amplitudes of one tip,
+        ``n_points / 2`` set-points each (``n_points`` even): the first log-uniform in
+        12 nm - 40 nm / r, the second r times larger, r uniform in 2.5 - 3.3 (both in the
+        tapping range). The ``n_points`` set-points are drawn as for one amplitude and dealt
+        alternately (every other one, so each amplitude spans the range): the first
+        amplitude's rows first, then the second's. A larger free amplitude indents further
+        at the same set-point ratio, which is what bounds the contact law
+        (docs/diagnose.md, "Several free amplitudes"); :meth:`SeriesCase.one_amplitude` is
+        the same draw at the first amplitude only.
     """
     if not (isinstance(n_points, (int, np.integer)) and 1 <= n_points <= 64):
         raise ValueError(f"n_points must be an integer in [1, 64], got {n_points!r}")
+    if free_amplitudes not in (1, 2) or isinstance(free_amplitudes, bool):
+        raise ValueError(f"free_amplitudes must be 1 or 2, got {free_amplitudes!r}")
+    if free_amplitudes == 2 and (n_points < 2 or n_points % 2):
+        raise ValueError(f"n_points must be even and >= 2 for two free amplitudes, got "
+                         f"{n_points!r}")
     if not 0.0 <= two_effect_share <= 1.0:
         raise ValueError(f"two_effect_share must be in [0, 1], got {two_effect_share!r}")
     if causes is None:
@@ -458,7 +504,11 @@ def draw_series_case(rng: np.random.Generator, *,
     else:
         chosen = _as_causes(causes)
     q = float(rng.uniform(150.0, 450.0))
-    amp = _loguniform(rng, 12e-9, 40e-9)
+    if free_amplitudes == 1:
+        amp = _loguniform(rng, 12e-9, 40e-9)
+    else:
+        ratio = float(rng.uniform(2.5, 3.3))
+        amp = _loguniform(rng, 12e-9, 40e-9 / ratio)
     hi, lo = float(rng.uniform(0.80, 0.92)), float(rng.uniform(0.30, 0.45))
     step = (hi - lo) / max(n_points - 1, 1)
     sp = np.linspace(hi, lo, n_points) + rng.uniform(-0.25, 0.25, n_points) * step
@@ -472,11 +522,16 @@ def draw_series_case(rng: np.random.Generator, *,
     effects = {c: _draw_effect(rng, c, quality_factor=q, reduced_modulus_pa=e_star,
                                series=True) for c in chosen}
     seed = int(rng.integers(2**31 - 1))
+    amps: tuple[float, ...] = ()
+    if free_amplitudes == 2:
+        order = np.r_[np.arange(0, n_points, 2), np.arange(1, n_points, 2)]
+        sp = sp[order]
+        amps = tuple(amp * (1.0 if k % 2 == 0 else ratio) for k in order)
     return SeriesCase(causes=chosen, quality_factor=q, free_amplitude_m=amp,
                       setpoints=tuple(float(v) for v in sp),
                       settle_offsets=tuple(float(v) for v in offsets), tip_radius_m=radius,
                       hamaker_j=hamaker, reduced_modulus_pa=e_star, a0_m=a0, effects=effects,
-                      seed=seed)
+                      seed=seed, free_amplitudes_m=amps)
 
 
 def simulate_series(case: SeriesCase, path: str | os.PathLike[str], *,
@@ -484,7 +539,8 @@ def simulate_series(case: SeriesCase, path: str | os.PathLike[str], *,
                     noise_level: float = 0.01, free_periods: float = 20.0,
                     drive_phase: bool = True, labels: bool = True,
                     min_tapping: int = 0) -> Path:
-    """Simulate the set-point series of ``case`` and write it as one trace file (atomically).
+    """Simulate the set-point series of ``case`` and write it as one trace file (atomically),
+    or, for a case at several free amplitudes, one file per free amplitude in a folder.
 
     The rows come from the simulator's ``spectroscopy`` scenario: each a steady record at its
     rest gap, reached as an approach reaches it (started on the free orbit, the rest gap
@@ -497,12 +553,21 @@ def simulate_series(case: SeriesCase, path: str | os.PathLike[str], *,
     only into ``/labels`` (force, modal deflections, per-row scalars, ``effect`` = the causes
     joined by ``+``); no attribute says which effect is on.
 
+    Several free amplitudes (``case.free_amplitudes_m``): ``path`` is a folder, which gets
+    one such file per free amplitude, ``amplitude-0.h5`` (the first, smallest), then
+    ``amplitude-1.h5``, each a valid trace-format-v1 series with its own free trace,
+    ``free_amplitude_m`` and rows (same lever, tip and law; ``/labels`` of each file: its
+    rows, and the whole case). :func:`series_files` lists them; diagnose them as one
+    experiment with ``afmlearn.diagnose.observation.read_experiment(series_files(path))``
+    or ``scripts/diagnose.py trace=[.../amplitude-0.h5,.../amplitude-1.h5]``.
+
     Parameters
     ----------
     case : SeriesCase
         From :func:`draw_series_case`.
     path : str or os.PathLike
-        Output ``.h5`` file; its name says nothing about the cause.
+        Output ``.h5`` file (a folder for several free amplitudes); its name says nothing
+        about the cause.
     samples_per_period : int
         Sampling rate / drive frequency, >= 20.
     n_periods : float
@@ -518,11 +583,12 @@ def simulate_series(case: SeriesCase, path: str | os.PathLike[str], *,
         Write ``/labels``.
     min_tapping : int
         Raise ``_NotTapping`` (nothing written) when fewer rows than this are in the
-        repulsive (tapping) regime.
+        repulsive (tapping) regime (per free amplitude, whose deepest row must tap).
 
     Returns
     -------
     pathlib.Path
+        The file (the folder for several free amplitudes).
 
     Raises
     ------
@@ -530,10 +596,28 @@ def simulate_series(case: SeriesCase, path: str | os.PathLike[str], *,
         When a row's integration diverged: non-finite, or ``|deflection|`` above 1.5 free
         amplitudes (nothing written; :func:`hidden_series` draws again).
     """
-    return _write_series(_simulate_series(case, samples_per_period=samples_per_period,
-                                          n_periods=n_periods, noise_level=noise_level,
-                                          free_periods=free_periods, min_tapping=min_tapping),
-                         path, drive_phase=drive_phase, labels=labels)
+    groups = _simulate_groups(case, samples_per_period=samples_per_period,
+                              n_periods=n_periods, noise_level=noise_level,
+                              free_periods=free_periods, min_tapping=min_tapping)
+    if len(groups) == 1:
+        return _write_series(groups[0], path, drive_phase=drive_phase, labels=labels)
+    folder = Path(path)
+    for g, data in enumerate(groups):
+        _write_series(data, folder / f"amplitude-{g}.h5", drive_phase=drive_phase,
+                      labels=labels)
+    return folder
+
+
+def series_files(path: str | os.PathLike[str]) -> list[Path]:
+    """The trace files :func:`simulate_series` wrote at ``path``: the file itself, or a
+    folder's ``amplitude-*.h5`` in order (first free amplitude first)."""
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(path.glob("amplitude-*.h5"), key=lambda p: int(p.stem.split("-")[1]))
+        if not files:
+            raise ValueError(f"path: no amplitude-*.h5 in the folder {path}")
+        return files
+    return [path]
 
 
 @final
@@ -542,6 +626,8 @@ class _SeriesData:
     """Simulated rows of a series in SI before writing (see :func:`simulate_series`)."""
 
     case: SeriesCase
+    rows: tuple[int, ...]             # the case's rows simulated here (one free amplitude)
+    free_amplitude_m: float
     deflection_m: FloatArray          # (n_points, n)
     force_n: FloatArray               # (n_points, n)
     modal_m: FloatArray               # (n_modes, n_points, n)
@@ -556,6 +642,39 @@ class _SeriesData:
 
 def _simulate_series(case: SeriesCase, *, samples_per_period: int, n_periods: float,
                      noise_level: float, free_periods: float, min_tapping: int) -> _SeriesData:
+    """The rows of a one-amplitude ``case`` (:func:`_simulate_groups` for several)."""
+    groups = _simulate_groups(case, samples_per_period=samples_per_period,
+                              n_periods=n_periods, noise_level=noise_level,
+                              free_periods=free_periods, min_tapping=min_tapping)
+    if len(groups) != 1:
+        raise ValueError(f"case has {len(groups)} free amplitudes; simulate them by group")
+    return groups[0]
+
+
+def _simulate_groups(case: SeriesCase, *, samples_per_period: int, n_periods: float,
+                     noise_level: float, free_periods: float, min_tapping: int
+                     ) -> list[_SeriesData]:
+    """The rows of ``case``, one :class:`_SeriesData` per free amplitude (in row order).
+
+    Row ``i``'s sensor noise is seeded by ``(seed, i + 1)`` whatever its amplitude, and the
+    first amplitude's free trace by ``(seed, 0)``, so the rows at the first amplitude are
+    those of :meth:`SeriesCase.one_amplitude`. ``min_tapping`` applies to each amplitude
+    (and its deepest row must tap).
+    """
+    amps = case.row_amplitudes_m
+    out = []
+    for g, a in enumerate(case.amplitudes_m):
+        rows = tuple(int(i) for i in np.flatnonzero(amps == a))
+        out.append(_simulate_rows(case, rows, a, 0 if g == 0 else len(amps) + g,
+                                  samples_per_period=samples_per_period, n_periods=n_periods,
+                                  noise_level=noise_level, free_periods=free_periods,
+                                  min_tapping=min_tapping))
+    return out
+
+
+def _simulate_rows(case: SeriesCase, rows: tuple[int, ...], free_amplitude_m: float,
+                   free_seed: int, *, samples_per_period: int, n_periods: float,
+                   noise_level: float, free_periods: float, min_tapping: int) -> _SeriesData:
     if samples_per_period < 20:
         raise ValueError(f"samples_per_period must be >= 20, got {samples_per_period}")
     if not n_periods >= 5:
@@ -572,7 +691,7 @@ def _simulate_series(case: SeriesCase, *, samples_per_period: int, n_periods: fl
                                     higher_quality_factors=[e["quality_factor_2"]])
     else:
         cl = Cantilever.rectangular(n_modes=1, quality_factor=case.quality_factor)
-    amp = case.free_amplitude_m / _GAP
+    amp = free_amplitude_m / _GAP
     exc = TipExcitation.for_free_amplitude(cl, 1.0, amp)
     free_amp = exc.free_amplitude(cl, 1.0)
 
@@ -591,9 +710,10 @@ def _simulate_series(case: SeriesCase, *, samples_per_period: int, n_periods: fl
                               scales=scales)
     system = System(cl, force, exc)
     integrator = RK4(steps_per_period=120)
-    gaps = np.asarray(case.setpoints) * amp
+    idx = np.asarray(rows, int)
+    gaps = np.asarray(case.setpoints)[idx] * amp
     res = Spectroscopy(omega=1.0, gaps=gaps, n_periods=n_periods,
-                       drive_phases=2 * np.pi * np.asarray(case.settle_offsets),
+                       drive_phases=2 * np.pi * np.asarray(case.settle_offsets)[idx],
                        settle_periods=3.0 * case.quality_factor,
                        samples_per_period=samples_per_period, integrator=integrator).run(system)
     # a steady tapping or attractive orbit stays within ~the free amplitude; rows far beyond
@@ -602,7 +722,7 @@ def _simulate_series(case: SeriesCase, *, samples_per_period: int, n_periods: fl
     reach = np.max(np.abs(np.asarray(res.deflection)), axis=-1) / free_amp
     if not np.all(np.isfinite(reach)) or np.any(reach > _MAX_REACH):
         bad = np.flatnonzero(~(reach <= _MAX_REACH))
-        raise FloatingPointError(f"rows {bad.tolist()} diverged: |deflection| up to "
+        raise FloatingPointError(f"rows {idx[bad].tolist()} diverged: |deflection| up to "
                                  f"{float(np.nanmax(reach)):.3g} free amplitudes")
     si = res.to_si(scales)
     lab = si["labels"]
@@ -614,11 +734,12 @@ def _simulate_series(case: SeriesCase, *, samples_per_period: int, n_periods: fl
     done = [{"y": res.deflection[k], "force": si["force_n"][k], "modal": si["modal_m"][:, k],
              "z": res.gap[k] * _GAP, "phase": float(phase[k]), "dt": res.dt,
              "labels": {key: v[k] for key, v in lab.items()}} for k in range(gaps.size)]
-    ys = [sensor(i + 1)(r["y"], x_ref=free_amp, dt=r["dt"]) * _GAP for i, r in enumerate(done)]
+    ys = [sensor(rows[k] + 1)(r["y"], x_ref=free_amp, dt=r["dt"]) * _GAP
+          for k, r in enumerate(done)]
     free_sc = SteadyState(omega=1.0, gap=1.0, n_periods=free_periods, settle_periods=0.0,
                           samples_per_period=samples_per_period, integrator=integrator)
     free = free_sc.run(System(cl, NoInteraction(), exc))
-    y_free = sensor(0)(free.deflection, x_ref=free_amp, dt=free.dt) * _GAP
+    y_free = sensor(free_seed)(free.deflection, x_ref=free_amp, dt=free.dt) * _GAP
     scalars: dict[str, Any] = {}
     for key in done[0]["labels"]:
         vals = [r["labels"][key] for r in done]
@@ -626,7 +747,8 @@ def _simulate_series(case: SeriesCase, *, samples_per_period: int, n_periods: fl
             scalars[key] = vals[0] if len(set(vals)) == 1 else ",".join(vals)
         else:
             scalars[key] = np.asarray(vals, float)
-    return _SeriesData(case=case, deflection_m=np.asarray(ys),
+    return _SeriesData(case=case, rows=tuple(rows), free_amplitude_m=free_amplitude_m,
+                       deflection_m=np.asarray(ys),
                        force_n=np.asarray([r["force"] for r in done]),
                        modal_m=np.stack([r["modal"] for r in done], axis=1),
                        tip_sample_gap_m=np.asarray([r["z"] for r in done]),
@@ -647,11 +769,12 @@ def _write_series(data: _SeriesData, path: str | os.PathLike[str], *, drive_phas
                                                   "drive_phase_rad": data.drive_phase_rad})
     # no higher_mode_frequencies_hz (it would give the cause away), neutral description
     trace = Trace(data.deflection_m, sample_rate_hz=data.sample_rate_hz,
-                  drive_frequency_hz=data.drive_frequency_hz, gap_m=case.gaps_m,
+                  drive_frequency_hz=data.drive_frequency_hz,
+                  gap_m=case.gaps_m[np.asarray(data.rows, int)],
                   drive_phase_rad=data.drive_phase_rad if drive_phase else None,
                   free_deflection_m=data.free_deflection_m, labels=lab,
                   spring_constant_n_per_m=_K, quality_factor=case.quality_factor,
-                  resonance_frequency_hz=_F0, free_amplitude_m=case.free_amplitude_m,
+                  resonance_frequency_hz=_F0, free_amplitude_m=data.free_amplitude_m,
                   excitation="tip", tip_radius_m=case.tip_radius_m,
                   description="afmlearn set-point series")
     path = Path(path)
@@ -662,19 +785,24 @@ def _write_series(data: _SeriesData, path: str | os.PathLike[str], *, drive_phas
 
 def hidden_series(rng: np.random.Generator, path: str | os.PathLike[str], *,
                   causes: str | tuple[str, ...] | None = None, n_points: int = 8,
-                  max_draws: int = 50, **kwargs: Any) -> SeriesCase:
-    """Draw a series (effects hidden unless given) and write it to ``path``.
+                  free_amplitudes: int = 1, max_draws: int = 50,
+                  **kwargs: Any) -> SeriesCase:
+    """Draw a series (effects hidden unless given) and write it to ``path`` (a folder of one
+    file per free amplitude when ``free_amplitudes`` is 2; :func:`series_files`).
 
     Draws again, with the same ``rng``, while fewer than half of the rows (and the row at
-    the smallest gap) tap: a user scanning set-points in tapping mode works where the tip
-    touches, though strong attraction (a biased tip, a sticky sample) keeps the larger
-    set-points on the attractive branch. ``kwargs`` go to :func:`simulate_series`. Returns
-    the case (the truth: keep it away from the code under test).
+    the smallest gap) tap, at each free amplitude: a user scanning set-points in tapping
+    mode works where the tip touches, though strong attraction (a biased tip, a sticky
+    sample) keeps the larger set-points on the attractive branch. ``kwargs`` go to
+    :func:`simulate_series`. Returns the case (the truth: keep it away from the code under
+    test).
     """
+    per = max(n_points // max(int(free_amplitudes), 1), 1)
     for _ in range(max_draws):
-        case = draw_series_case(rng, causes=causes, n_points=n_points)
+        case = draw_series_case(rng, causes=causes, n_points=n_points,
+                                free_amplitudes=free_amplitudes)
         try:
-            simulate_series(case, path, min_tapping=max((n_points + 1) // 2, 1), **kwargs)
+            simulate_series(case, path, min_tapping=max((per + 1) // 2, 1), **kwargs)
         except (_NotTapping, FloatingPointError):
             # FloatingPointError: the integration diverged (the tip crossed z = 0 where the
             # drawn law has no repulsion): no recording, draw again
@@ -723,25 +851,40 @@ def effect_visibility(case: SeriesCase, *, samples_per_period: int = 200,
         raise ValueError(f"noise_level must be in (0, 1], got {noise_level}")
     opts = {"samples_per_period": samples_per_period, "n_periods": n_periods,
             "noise_level": 0.0, "free_periods": 1.0, "min_tapping": 0}
-    drawn = _simulate_series(case, **opts)
-    c_drawn = _row_harmonics(drawn.deflection_m, samples_per_period, n_harmonics)
+    c_drawn, regime = _clean_rows(case, opts, samples_per_period, n_harmonics)
     n = int(n_periods) * samples_per_period
-    sigma = noise_level * case.free_amplitude_m
-    weight = np.full(n_harmonics + 1, n / (2 * sigma**2))
-    weight[0] = n / sigma**2
+    sigma = noise_level * case.row_amplitudes_m[:, None]      # each row's own free amplitude
+    weight = np.broadcast_to(n / (2 * sigma**2), (sigma.size, n_harmonics + 1)).copy()
+    weight[:, 0] *= 2.0
     out: dict[str, dict[str, Any]] = {}
     for cause in case.causes:
         rest = tuple(c for c in case.causes if c != cause)
-        twin = _simulate_series(
+        c_twin, regime_twin = _clean_rows(
             SeriesCase(**{**case.__dict__, "causes": rest,
-                          "effects": {c: case.effects[c] for c in rest}}), **opts)
-        c_twin = _row_harmonics(twin.deflection_m, samples_per_period, n_harmonics)
+                          "effects": {c: case.effects[c] for c in rest}}),
+            opts, samples_per_period, n_harmonics)
         rows = (np.abs(c_drawn - c_twin) ** 2 * weight).sum(axis=1)
         out[cause] = {"chi2_rows": [float(v) for v in rows], "chi2_total": float(rows.sum()),
-                      "same_branch": bool(np.array_equal(
-                          np.atleast_1d(drawn.scalars["regime"]),
-                          np.atleast_1d(twin.scalars["regime"])))}
+                      "same_branch": regime == regime_twin}
     return out
+
+
+def _clean_rows(case: SeriesCase, opts: dict[str, Any], spp: int, n_harmonics: int
+                ) -> tuple[NDArray[np.complex128], list[str]]:
+    """Harmonics (:func:`_row_harmonics`, rows in the case's order) and regime of every
+    row of ``case`` simulated with ``opts`` (every free amplitude)."""
+    groups = _simulate_groups(case, **opts)
+    n_rows = len(case.setpoints)
+    c = np.empty((n_rows, n_harmonics + 1), complex)
+    regime = [""] * n_rows
+    for data in groups:
+        idx = np.asarray(data.rows, int)
+        c[idx] = _row_harmonics(data.deflection_m, spp, n_harmonics)
+        joined = str(data.scalars["regime"])      # one word when every row agrees
+        words = joined.split(",") if "," in joined else [joined] * idx.size
+        for k, r in zip(idx, words, strict=True):
+            regime[int(k)] = r
+    return c, regime
 
 
 def _row_harmonics(y: FloatArray, spp: int, n_harmonics: int) -> NDArray[np.complex128]:
