@@ -6,13 +6,20 @@ Examples
     python scripts/identify.py trace=series.h5 out_dir=out          # all set-points jointly
     python scripts/identify.py trace=series.h5 row=3 out_dir=out    # one set-point alone
     python scripts/identify.py trace=sweep.h5 row=20 out_dir=out identifier=fast
+    python scripts/identify.py 'trace=[a15.h5,a45.h5]' out_dir=out  # two files, one tip: jointly
 
 Writes <out_dir>/result.json, model.json, force.h5 and figures (see
 afmlearn.identify.infer.identify_trace; figures from afmlearn.plots.identify); the file's
 /labels group is never read. Prints the equation and the contact exponent with its 95 %
 profile-likelihood interval (saying so when the data do not bound it). Bad input (missing
 calibration, fewer than 20 samples per drive period, clipped signal, NaN, not a trace file, a
-sweep without `row`) prints `error: ...` and exits with status 2.
+sweep without `row`, files of different cantilevers) prints `error: ...` and exits with
+status 2.
+
+A list of files (e.g. set-point series of one tip at two free amplitudes: the second amplitude
+is what bounds the contact exponent, docs/identify.md) is one experiment: every row of every
+file is fitted jointly (afmlearn.identify.infer.read_files); result.json's `joint` lists the
+inputs and each observation's (file, row).
 
 A lock-in curve (an Asylum AM curve .ibw, or a trace with amplitude_m/phase_rad and no
 deflection) gets the curve analysis instead (afmlearn.curves.analyze.identify_curve): the
@@ -26,7 +33,7 @@ from __future__ import annotations
 import hydra
 from _cli import bad_input_exits
 from hydra.utils import instantiate
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
 from afmlearn.curves import CurveDiagnoser
 from afmlearn.curves.analyze import identify_curve, is_curve_file
@@ -39,10 +46,16 @@ from afmlearn.plots.identify import identify_figures
 @hydra.main(config_path="../conf", config_name="identify", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.identify.infer.identify_trace` and print the equation."""
-    if is_curve_file(cfg.trace):
+    paths = [str(p) for p in cfg.trace] if OmegaConf.is_list(cfg.trace) else [str(cfg.trace)]
+    if len(paths) > 1 and any(is_curve_file(p) for p in paths):
+        with bad_input_exits():
+            raise ValueError("trace: lock-in curves are identified one file at a time here; "
+                             "for one law over several curves use scripts/analyze_curves.py "
+                             "joint=true")
+    if len(paths) == 1 and is_curve_file(paths[0]):
         with bad_input_exits(ValueError, OSError):
             curves = cfg.get("curves")
-            res = identify_curve(cfg.trace, cfg.out_dir, index=cfg.row or 0,
+            res = identify_curve(paths[0], cfg.out_dir, index=cfg.row or 0,
                                  diagnoser=CurveDiagnoser(**curves) if curves else None,
                                  figures=curve_figures if cfg.figures else None)
         print(res["equation"])
@@ -51,7 +64,7 @@ def main(cfg: DictConfig) -> None:
         return
     with bad_input_exits(ValueError):  # InputError, TraceFormatError, bad settings
         identifier = instantiate(cfg.identifier)
-        result = identify_trace(cfg.trace, cfg.out_dir, row=cfg.row, identifier=identifier,
+        result = identify_trace(paths, cfg.out_dir, row=cfg.row, identifier=identifier,
                                 figures=identify_figures if cfg.figures else None)
     summary = result["summary"]
     print(result["equation"])

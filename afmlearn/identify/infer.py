@@ -1,7 +1,8 @@
-"""Identify the tip--sample force of one recorded trace file and write the results.
+"""Identify the tip--sample force of one recorded trace file (or several) and write the results.
 
 :func:`identify_trace` is the one function behind ``scripts/identify.py``. It reads a trace
-format v1 file **without its /labels group** (``afmlearn.io.read_trace(path)``; the file name is
+format v1 file (or several files of one cantilever: :func:`read_files`, one experiment)
+**without its /labels group** (``afmlearn.io.read_trace(path)``; the file name is
 never interpreted), fits a :class:`ForceIdentifier` and writes into ``out_dir`` (each file
 atomically: temporary sibling + ``os.replace``):
 
@@ -34,7 +35,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -49,25 +50,29 @@ from afmlearn.preprocess import Calibrated, calibrate, check_trace, checked_row
 from .identifier import LINEAR_TERMS, ForceIdentifier
 from .library import AFMLibrary
 
-__all__ = ["identify_trace", "identify_and_describe", "candidates_table", "calibration_record",
-           "write_force_h5", "write_series_force_h5", "write_json", "jsonable", "RESULT_FORMAT"]
+__all__ = ["identify_trace", "identify_and_describe", "read_files", "candidates_table",
+           "calibration_record", "write_force_h5", "write_series_force_h5", "write_json",
+           "jsonable", "RESULT_FORMAT"]
 
 RESULT_FORMAT = "afmlearn-identify-result"
+PathLike = str | os.PathLike[str]
 
 
 #: ``figures(identifier, calibrated, out_dir) -> {name: path}`` (the script layer's plots)
 FigureWriter = Callable[[ForceIdentifier, Calibrated, Path], dict[str, str]]
 
 
-def identify_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
+def identify_trace(path: PathLike | Sequence[PathLike], out_dir: str | os.PathLike[str], *,
                    row: int | None = None, identifier: ForceIdentifier | None = None,
                    figures: FigureWriter | None | bool = None) -> dict[str, Any]:
     """Identify the force of one trace file (one row of a sweep) and write the results.
 
     Parameters
     ----------
-    path : str or os.PathLike
-        Trace file, format v1. Its ``/labels`` group is never read.
+    path : str or os.PathLike, or a sequence of them
+        Trace file, format v1. Its ``/labels`` group is never read. Several files (e.g. set-point
+        series of one tip at two free amplitudes) are ONE experiment: every observation of
+        every file is fitted jointly (:func:`read_files`); a sequence of one is one path.
     out_dir : str or os.PathLike
         Output folder (created if missing); existing result files are replaced.
     row : int, optional
@@ -98,12 +103,18 @@ def identify_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]
         ``row`` missing for a sweep or out of range, or bad identifier settings.
     """
     t0 = time.perf_counter()
-    path = Path(path)
+    paths = _paths(path)
     out = Path(out_dir)
-    trace = read_trace(path)                      # labels=False: /labels is never opened
     ide = identifier if identifier is not None else ForceIdentifier()
     if not isinstance(ide, ForceIdentifier):
         raise ValueError(f"identifier must be a ForceIdentifier, got {type(ide).__name__}")
+    if len(paths) > 1:
+        if row is not None:
+            raise ValueError(f"row must be null when several trace files are identified "
+                             f"jointly, got {row!r}")
+        return _identify_files(paths, out, ide, figures=figures, t0=t0)
+    path = paths[0]
+    trace = read_trace(path)                      # labels=False: /labels is never opened
     if getattr(trace, "is_series", False):
         if row is None:
             return _identify_series(trace, out, ide, input_path=path, figures=figures,
@@ -134,12 +145,14 @@ def identify_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]
     return {**result, "identifier": ide}
 
 
-def identify_and_describe(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
+def identify_and_describe(path: PathLike | Sequence[PathLike],
+                          out_dir: str | os.PathLike[str], *,
                           row: int | None = None,
                           identifier: ForceIdentifier | None = None) -> str:
-    """Identify a trace or set-point series file and return the lines to show a user.
+    """Identify a trace or set-point series file (or several) and return the lines to show.
 
-    :func:`identify_trace` (a series: every row jointly), then the equation (dimensionless
+    :func:`identify_trace` (a series, several files: every row jointly), then the equation
+    (dimensionless
     and SI) and the contact exponent with its 95 % profile-likelihood interval, saying so
     when the data do not bound it. The demo prints the returned text.
     """
@@ -147,8 +160,9 @@ def identify_and_describe(path: str | os.PathLike[str], out_dir: str | os.PathLi
 
     res = identify_trace(path, out_dir, row=row, identifier=identifier)
     n = res.get("joint", {}).get("n_observations", 1)
-    head = (f"joint fit of {n} set-points (one force law)" if n > 1
-            else "single-orbit fit")
+    n_files = len(res.get("joint", {}).get("inputs", ()))
+    head = (f"joint fit of {n} set-points" + (f" from {n_files} files" if n_files > 1 else "")
+            + " (one force law)" if n > 1 else "single-orbit fit")
     return "\n".join([head, res["equation"], res["equation_si"],
                       format_exponent(res["summary"])])
 
@@ -177,11 +191,109 @@ def _identify_series(trace: Trace, out: Path, ide: ForceIdentifier, *,
     return {**result, "identifier": ide}
 
 
-def write_series_force_h5(path: str | os.PathLike[str], ide: ForceIdentifier, trace: Trace
-                          ) -> Path:
-    """Force of a joint fit aligned with a series' ``deflection_m`` (n_points, n), atomically."""
+def read_files(paths: Sequence[PathLike]) -> tuple[Experiment, list[tuple[int, int]]]:
+    """The observations of several trace files as ONE experiment (one cantilever and tip).
+
+    Parameters
+    ----------
+    paths : sequence of str or os.PathLike
+        Trace files (format v1: single steady traces or set-point series) or instrument files
+        that hold steady records; read without their ``/labels`` group.
+
+    Returns
+    -------
+    experiment : Experiment
+        Every observation of every file, in the order given.
+    origin : list of (int, int)
+        ``(file index, row in that file)`` of each observation.
+
+    Raises
+    ------
+    ValueError
+        A file that cannot be read (TraceFormatError), a sweep, ramp or lock-in curve among
+        them, files of different cantilevers (``Experiment``'s shared fields; the message names
+        both files and the field), or records of different lengths.
+    """
+    obs: list[Trace] = []
+    origin: list[tuple[int, int]] = []
+    for k, p in enumerate(paths):
+        exp = Experiment.read(p)                  # labels=False: /labels is never opened
+        if exp.kind not in ("single", "series"):
+            raise ValueError(f"trace: {Path(p).name} is a {exp.kind}; only steady traces and "
+                             "set-point series can be identified jointly from several files")
+        if obs:
+            try:
+                Experiment([obs[0], exp[0]])
+            except ValueError as err:             # it names observations: say which files
+                raise ValueError(f"trace: {Path(paths[0]).name} and {Path(p).name} are not of "
+                                 f"one cantilever (identify them separately): {err}") from None
+        for i, tr in enumerate(exp):
+            if obs and tr.n_samples != obs[0].n_samples:
+                raise ValueError(
+                    f"trace: every record must have the same number of samples; "
+                    f"{Path(paths[0]).name} has {obs[0].n_samples}, "
+                    f"{Path(p).name} row {i} has {tr.n_samples}")
+            obs.append(tr)
+            origin.append((k, i))
+    return Experiment(obs), origin
+
+
+def _paths(path: PathLike | Sequence[PathLike]) -> list[Path]:
+    if isinstance(path, str | os.PathLike):
+        return [Path(path)]
+    paths = [Path(p) for p in path]
+    if not paths:
+        raise ValueError("trace must name at least one file, got an empty list")
+    return paths
+
+
+def _identify_files(paths: list[Path], out: Path, ide: ForceIdentifier, *,
+                    figures: FigureWriter | None | bool, t0: float) -> dict[str, Any]:
+    """Every observation of several files jointly: fit, then write the same files."""
+    exp, origin = read_files(paths)
+    ide.fit(exp)
+    cal = ide.joint_.problem.observations[0].calibrated
+    out.mkdir(parents=True, exist_ok=True)
+    files: dict[str, str] = {"model": str(ide.model_.save(out / "model.json"))}
+    n = exp[0].n_samples
+    files["force"] = str(write_series_force_h5(out / "force.h5", ide, shape=(len(exp), n),
+                                               sample_rate_hz=exp[0].sample_rate_hz,
+                                               inputs=paths, origin=origin))
+    if figures:
+        files.update(figures(ide, cal, out))
+    result = result_record(ide, cal, input_path=paths[0], row=None,
+                           runtime_s=time.perf_counter() - t0)
+    result["input"] = [str(p.resolve()) for p in paths]
+    result["joint"] = {"n_observations": len(exp),
+                       "inputs": [str(p.resolve()) for p in paths],
+                       "origin": [list(o) for o in origin],
+                       "rest_gaps_m": np.asarray(exp.gaps_m, float).tolist(),
+                       "length_unit_m": ide.joint_.problem.length_m,
+                       "drive_ratios": np.asarray(ide.joint_.problem.drive_ratios,
+                                                  float).tolist(),
+                       "offsets": ide.joint_.problem.offsets.tolist(),
+                       "phase": jsonable(ide.joint_.phase_info)}
+    result["files"] = {**files, "result": str(out / "result.json")}
+    write_json(out / "result.json", result)
+    return {**result, "identifier": ide}
+
+
+def write_series_force_h5(path: str | os.PathLike[str], ide: ForceIdentifier,
+                          trace: Trace | None = None, *, shape: tuple[int, int] | None = None,
+                          sample_rate_hz: float | None = None,
+                          inputs: Sequence[PathLike] = (),
+                          origin: Sequence[tuple[int, int]] = ()) -> Path:
+    """Force of a joint fit aligned with a series' ``deflection_m`` (n_points, n), atomically.
+
+    Without ``trace`` (observations of several files), ``shape`` (n_obs, n) and
+    ``sample_rate_hz`` give the layout; ``inputs`` (the files) and ``origin`` ((file index,
+    row) per observation) are then stored as attribute and dataset ``origin`` (n_obs, 2).
+    """
     sc = ide.model_.scales
-    n = trace.n_samples
+    if trace is not None:
+        shape, sample_rate_hz = trace.deflection_m.shape, trace.sample_rate_hz
+    assert shape is not None and sample_rate_hz is not None
+    n = shape[1]
     z = np.asarray(ide.joint_.problem.length_m, float)
     gaps = np.array([o.gap for o in ide.joint_.problem.observations])
     series = {
@@ -193,11 +305,15 @@ def write_series_force_h5(path: str | os.PathLike[str], ide: ForceIdentifier, tr
     path = Path(path)
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         for key, value in series.items():
-            assert value.shape == trace.deflection_m.shape, (key, value.shape)
+            assert value.shape == tuple(shape), (key, value.shape)
             ds = f.create_dataset(key, data=value)
             ds.attrs["unit"] = "m" if key == "gap_m" else "N"
-        ds = f.create_dataset("time_s", data=np.arange(n) / trace.sample_rate_hz)
+        ds = f.create_dataset("time_s", data=np.arange(n) / sample_rate_hz)
         ds.attrs["unit"] = "s"
+        if inputs:
+            f.attrs["inputs"] = [str(Path(p).resolve()) for p in inputs]
+            f.create_dataset("origin", data=np.asarray(origin, dtype=np.int64))
+            f["origin"].attrs["description"] = "(index in inputs, row of that file)"
         f.attrs["format"] = "afmlearn-force"
         f.attrs["afmlearn_version"] = afmlearn.__version__
         f.attrs["row"] = -1
