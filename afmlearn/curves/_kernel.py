@@ -28,6 +28,10 @@ index  term
 8      ``R`` electrostatic radius
 9      ``neck``: on the retracting half, a contact made at the bottom breaks at
        ``z = a0 + neck``; in between the force is held at ``-vdw / a0**2``
+10     ``far_damping``: ``-c_f exp(-z / z_f) z'`` at all gaps (a second damping term, for a
+       loss far from the sample, e.g. squeeze-film damping over microns, next to a
+       near-contact one)
+11     ``z_f`` its decay length
 =====  =========================================================================
 """
 
@@ -38,7 +42,7 @@ import math
 import numpy as np
 from numba import njit
 
-N_LAW = 10
+N_LAW = 12
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
 
@@ -62,6 +66,8 @@ def force(law, z: float, zd: float, mode: int) -> float:
         zl = z
     if law[5] != 0.0:
         f -= law[5] * math.exp(-z / law[6]) * zd
+    if law[10] != 0.0:
+        f -= law[10] * math.exp(-z / law[11]) * zd
     if law[7] != 0.0:
         f -= law[7] / (zl * (zl + law[8]))
     return f

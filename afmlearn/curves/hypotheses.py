@@ -11,10 +11,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import final
 
-__all__ = ["Parameter", "Hypothesis", "BASELINE", "EXTENSIONS", "DRIFT"]
+__all__ = ["Parameter", "Hypothesis", "BASELINE", "EXTENSIONS", "DRIFT", "FAR_OFF"]
 
 #: pseudo-field of the drift rate of the rest gap (not a law term)
 DRIFT = "drift"
+#: start of the far-field damping coefficient that leaves it practically off (a thousandth of
+#: a typical lever's own damping 1/Q ~ 5e-3)
+FAR_OFF = 1e-7
 
 
 @final
@@ -52,12 +55,16 @@ EXTENSIONS: tuple[Hypothesis, ...] = (
                                               alternatives=(1.2, 2.5)),)),
     Hypothesis("viscoelastic", (Parameter("visco", 0.05, 1e-5, 1e3,
                                           alternatives=(0.0005, 0.005, 0.5)),)),
+    # two terms of one cause (physics.md: exponential damping): a near-contact loss (decay
+    # up to 3 free amplitudes) and a far-field one (squeeze-film damping, decay 1 to 1000 free
+    # amplitudes: microns), each off or on at the start; the Asylum curves show both (A, s4)
     Hypothesis("long_range_damping", (Parameter("damping", 1e-3, 1e-7, 1e1,
-                                                alternatives=(1e-4, 1e-2)),
-                                      # up to 100 free amplitudes: squeeze-film damping
-                                      # reaches microns
-                                      Parameter("decay_length", 0.1, 1e-3, 100.0,
-                                                alternatives=(1.0, 10.0)))),
+                                                alternatives=(1e-2,)),
+                                      Parameter("decay_length", 0.1, 1e-3, 3.0,
+                                                alternatives=(0.03, 0.5)),
+                                      Parameter("far_damping", FAR_OFF, 1e-8, 1e-1,
+                                                alternatives=(3e-4,)),
+                                      Parameter("far_decay_length", 20.0, 1.0, 1000.0))),
     # the tail trades against the attraction: starts up to 100x the usual vdW scale, each
     # with the baseline's attraction rescaled (fit.RESCALES)
     Hypothesis("electrostatic", (Parameter("electrostatic", 1e-4, 1e-9, 1e0,

@@ -40,6 +40,11 @@ class CurveLaw:
         Electrostatic tail ``-electrostatic / (z (z + radius))`` (>= 0).
     neck : float
         Adhesion neck: a contact breaks on retraction at ``z = a0 + neck`` (>= 0; 0 = none).
+    far_damping, far_decay_length : float
+        A second damping term ``-far_damping * exp(-z / far_decay_length) * z_dot`` (>= 0;
+        0 = none): a loss far from the sample (squeeze-film damping over microns) next to the
+        near-contact one of ``damping``. The two terms have the same form; which one is
+        "near" is a matter of their bounds in the hypothesis (``hypotheses.py``).
     """
 
     a0: float
@@ -52,22 +57,26 @@ class CurveLaw:
     electrostatic: float = 0.0
     radius: float = 1.0
     neck: float = 0.0
+    far_damping: float = 0.0
+    far_decay_length: float = 10.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
             if not np.isfinite(v) or v < 0.0:
                 raise ValueError(f"CurveLaw.{f.name} must be a finite number >= 0, got {v!r}")
-        if self.a0 <= 0.0 or self.decay_length <= 0.0 or self.radius <= 0.0:
-            raise ValueError("CurveLaw: a0, decay_length and radius must be > 0")
+        if (self.a0 <= 0.0 or self.decay_length <= 0.0 or self.radius <= 0.0
+                or self.far_decay_length <= 0.0):
+            raise ValueError("CurveLaw: a0, decay_length, far_decay_length and radius must be "
+                             "> 0")
         if not 1.0 <= self.exponent <= 4.0:
             raise ValueError(f"CurveLaw.exponent must lie in [1, 4], got {self.exponent!r}")
 
     def vector(self) -> NDArray[np.float64]:
-        """The compiled kernel's law vector, shape (10,) (layout in ``_kernel``)."""
+        """The compiled kernel's law vector, shape (12,) (layout in ``_kernel``)."""
         return np.array([self.a0, self.vdw, self.stiffness, self.exponent, self.visco,
                          self.damping, self.decay_length, self.electrostatic, self.radius,
-                         self.neck])
+                         self.neck, self.far_damping, self.far_decay_length])
 
     def replace(self, **changes: float) -> CurveLaw:
         return replace(self, **changes)
@@ -112,6 +121,7 @@ class CurveLaw:
         out = np.where(mode == 1, contact, np.where(mode == 2, -self.vdw / self.a0**2,
                                                      -self.vdw / np.maximum(zs, 1e-300)**2))
         out = out - self.damping * np.exp(-z / self.decay_length) * zd
+        out = out - self.far_damping * np.exp(-z / self.far_decay_length) * zd
         zl = np.where(mode == 1, self.a0, z)
         out = out - self.electrostatic / (zl * (zl + self.radius))
         return out
