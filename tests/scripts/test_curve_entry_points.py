@@ -3,14 +3,18 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 
-from afmlearn.curves.analyze import is_curve_file
+from afmlearn.curves import CurveFitter
+from afmlearn.curves.analyze import is_curve_file, load_curve
+from afmlearn.curves.diagnose import heldout_nrmse
 from afmlearn.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -48,13 +52,35 @@ def test_identify_fits_the_baseline_law_to_a_curve(run_script, curve_path, tmp_p
     res = json.loads((out / "result.json").read_text())
     assert res["equation"].startswith("F = -") and "d^1.5" in res["equation"]
     # the simulated law is the baseline's (DMT sphere): the retraction, never fitted, is
-    # predicted to a few per cent of the free amplitude / of pi/2. Measured 0.030 and 0.054 on
-    # two simulations of this curve that differ by 1e-12 relative (before/after the force
-    # kernel's trial-stage fix): the fit lands in one of two close basins (vdW 0.11 vs 0.02 nN
-    # nm^2), an open fragility of the curve fit's start selection (session-3 note)
-    assert 0.0 < res["heldout_nrmse"] < 0.06
+    # predicted to a few per cent of the free amplitude / of pi/2 (measured 0.023; 0.030 or
+    # 0.054 before the start grid's half decades of stiffness, depending on the last digits of
+    # the simulation: see the next test)
+    assert 0.0 < res["heldout_nrmse"] < 0.035
     assert res["parameters"]["vdw"] > 0 and res["curve"]["adhesion_force_n"] > 0
     assert "F = -" in stdout and "result.json" in stdout
+
+
+def test_the_fit_does_not_turn_on_the_last_digits_of_the_data(curve_path):
+    # the same curve simulated twice 1e-12 apart once fitted to chi2 1054 or 1240 (held-out
+    # NRMSE 0.030 / 0.054), and 1e-10 relative perturbations scattered it over 1053-1240: the
+    # refinement stalls in a rough valley wherever its start sits (start grid too coarse in
+    # stiffness, one start refined). Now every perturbation must land on the same fit.
+    curve, lockin = load_curve(curve_path)
+    app, ret = curve.segment == 0, curve.segment == 1
+    fits = []
+    for seed in (None, 0, 1, 2):
+        c = curve
+        if seed is not None:
+            rng = np.random.default_rng(seed)
+            c = dataclasses.replace(
+                curve, amplitude=curve.amplitude * (1.0 + 1e-10 * rng.standard_normal(curve.n)),
+                phase=curve.phase + 1e-10 * rng.standard_normal(curve.n))
+        f = CurveFitter(lockin=lockin).fit(c, mask=app)
+        fits.append((f.chi2_, f.law_.vdw, heldout_nrmse(f, c, ret)))
+    chi2, vdw, held = np.array(fits).T
+    assert np.ptp(chi2) < 1e-3 * chi2.min()
+    assert np.ptp(np.log(vdw)) < 0.05  # one basin: vdW to 5 %
+    assert np.ptp(held) < 0.003
 
 
 def test_diagnose_names_no_cause_on_a_plain_curve(run_script, curve_path, tmp_path):
