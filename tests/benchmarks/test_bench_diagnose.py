@@ -12,7 +12,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_diagnose import calibrate, upper_bound  # noqa: E402
+from bench_diagnose import _parse_variant, calibrate, upper_bound  # noqa: E402
 
 
 def _null(drops: dict[str, float]) -> dict:
@@ -42,3 +42,13 @@ def test_one_sided_bound_with_no_false_cause_is_the_rule_of_three_exact_form():
     assert upper_bound(3, 3) == 1.0
     # more false causes in the same number of nulls: a larger bound
     assert upper_bound(0, 30) < upper_bound(1, 30) < upper_bound(2, 30)
+
+
+def test_variants_name_the_rows_and_the_design():
+    assert _parse_variant("8:phase") == (8, True, "one")
+    assert _parse_variant("1:none") == (1, False, "one")
+    assert _parse_variant("2x4:phase") == (8, True, "two")       # both amplitudes, 4 rows each
+    assert _parse_variant("twin:none") == (8, False, "twin")
+    for bad in ("3:phase", "8:yes", "8"):
+        with pytest.raises(ValueError, match="--variants"):
+            _parse_variant(bad)
