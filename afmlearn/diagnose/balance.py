@@ -282,7 +282,7 @@ class HarmonicBalance:
         spec = sol.spec
         x, v, _ = o.true_orbit(spec)
         z, zd = o.gap - x, -v
-        c = sol.coef[N_LEVER:]
+        c = sol.coef[N_LEVER:N_LEVER + spec.n_force]     # (a joint fit's other drives follow)
         att = neck_state(z, spec.a0, spec.neck_length)
         h = 1e-6 * max(float(np.ptp(z)), 1e-9)
         fz = (spec.columns(z + h, zd, att) - spec.columns(z - h, zd, att)) @ c / (2 * h)
