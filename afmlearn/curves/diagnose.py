@@ -324,6 +324,8 @@ def equation(law: CurveLaw, curve: Curve) -> str:
         parts.append(f"+ {law.visco * fu / lu**0.5:.4g} sqrt(d) d' (d' per unit omega0 t)")
     if law.damping:
         parts.append(f"- {law.damping * fu:.4g} exp(-z/{law.decay_length * lu:.3g}) z'")
+    if law.far_damping:
+        parts.append(f"- {law.far_damping * fu:.4g} exp(-z/{law.far_decay_length * lu:.3g}) z'")
     if law.electrostatic:
         parts.append(f"- {law.electrostatic * fu * lu**2:.4g}/(z (z + "
                      f"{law.radius * lu:.3g}))")

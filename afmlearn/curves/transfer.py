@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 __all__ = ["law_from_parameters", "rescale_law", "transfer_gains", "transfer_nrmse"]
 
 #: law fields that are lengths (scale with 1 / length unit)
-_LENGTHS = ("a0", "decay_length", "radius", "neck")
+_LENGTHS = ("a0", "decay_length", "radius", "neck", "far_decay_length")
 
 
 def law_from_parameters(values: dict[str, float], length_m: float, *, a0_m: float = 0.3e-9,

@@ -16,7 +16,7 @@ K_N, Q = 2.7, 150.0
 L1, L2 = 20e-9, 45e-9
 LAW1 = CurveLaw(a0=0.3e-9 / L1, vdw=2e-6, stiffness=40.0, exponent=1.5, damping=2e-3,
                 decay_length=1.5, visco=0.05, electrostatic=1e-5, radius=10e-9 / L1,
-                neck=0.02)
+                neck=0.02, far_damping=1e-4, far_decay_length=8.0)
 
 
 def test_rescaled_law_is_the_same_si_force():
