@@ -20,8 +20,10 @@ from simulator.lockin import LockIn
 
 from .curve import Curve
 from .diagnose import CurveDiagnoser
+from .law import CurveLaw
 
-__all__ = ["analyze_curve", "analyze_folder", "identify_curve", "is_curve_file", "load_curve"]
+__all__ = ["analyze_curve", "analyze_folder", "damping_terms_si", "identify_curve",
+           "is_curve_file", "load_curve"]
 
 log = logging.getLogger(__name__)
 
@@ -147,11 +149,34 @@ def analyze_curve(trace: str | os.PathLike[str], out_dir: str | os.PathLike[str]
     if lockin is not None:
         diag.lockin = lockin
     diag.fit(curve)
-    report = diag.report() if build is None else build(diag)
+    if build is None:
+        report = diag.report()
+        report["curve"]["damping_terms"] = damping_terms_si(diag.extended_.law_, curve)
+    else:
+        report = build(diag)
     path = _write_report(report, report["curve"], curve, diag, out_dir, figures=figures,
                          inputs=Path(trace).name, filename=filename)
     log.info("%s: %s written", Path(trace).name, path)
     return report
+
+
+def damping_terms_si(law: CurveLaw, curve: Curve) -> list[dict[str, Any]]:
+    """The law's damping terms in SI, for the report (``long_range_damping`` has two).
+
+    Returns
+    -------
+    list of dict
+        One per term that is on (``CurveLaw.damping_terms``): ``term`` (``"near"``: the
+        near-contact term ``damping``; ``"far"``: the far-field one), ``coefficient_n_s_per_m``
+        (``c`` of ``-c exp(-z / z_b) z'``), ``decay_length_m`` (``z_b``) and
+        ``times_lever_damping`` (``c`` over the lever's own damping ``k / (omega0 Q)``).
+    """
+    k = curve.spring_constant_n_per_m
+    w0 = 2.0 * math.pi * curve.resonance_frequency_hz
+    return [{"term": name, "coefficient_n_s_per_m": c * k / w0,
+             "decay_length_m": zb * curve.length_m,
+             "times_lever_damping": c * curve.quality_factor}
+            for name, c, zb in law.damping_terms()]
 
 
 def _write_report(report: dict[str, Any], section: dict[str, Any], curve: Any, diag: Any,

@@ -89,6 +89,14 @@ class CurveLaw:
         """Pull-off (adhesion) force ``vdw / a0**2``."""
         return self.vdw / self.a0**2
 
+    def damping_terms(self) -> list[tuple[str, float, float]]:
+        """The exponential damping terms that are on: ``(name, coefficient, decay_length)``,
+        ``"near"`` (``damping``) then ``"far"`` (``far_damping``); coefficients in ``k / omega0``
+        units (the lever's own damping is ``1 / Q`` in them), lengths / ``L_ref``."""
+        return [(name, c, zb) for name, c, zb in (("near", self.damping, self.decay_length),
+                                                  ("far", self.far_damping,
+                                                   self.far_decay_length)) if c > 0.0]
+
     def conservative(self, z: ArrayLike) -> NDArray[np.float64]:
         """Conservative force on approach at gaps ``z`` (shape of ``z``), no rate terms."""
         return self.force(z, 0.0)

@@ -4,15 +4,17 @@ run resumes from the reports already written."""
 from __future__ import annotations
 
 import json
+import math
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.core.global_hydra import GlobalHydra
 
-from afmlearn.curves import EXTENSIONS, CurveDiagnoser
-from afmlearn.curves.analyze import analyze_folder
+from afmlearn.curves import EXTENSIONS, Curve, CurveDiagnoser, CurveLaw
+from afmlearn.curves.analyze import analyze_folder, damping_terms_si
 from afmlearn.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -50,6 +52,8 @@ def test_batch_records_errors_and_resumes(folder, tmp_path):
     assert rows["good/a.h5"]["heldout_nrmse_baseline"] == rows["good/b.h5"][
         "heldout_nrmse_baseline"]
     report = out / "good" / "a" / "report.json"
+    # the damping terms in SI (none: the only hypothesis tried here is the contact exponent)
+    assert json.loads(report.read_text())["curve"]["damping_terms"] == []
     stamp = report.stat().st_mtime_ns
     s2 = analyze_folder(folder, out, make_diagnoser=quick, time_limit_s=300)
     assert report.stat().st_mtime_ns == stamp  # read back, not redone
@@ -83,3 +87,25 @@ def test_group_summary_counts_agreement_and_gains():
     assert s["n_named"] == 3 and s["gain_positive"] == pytest.approx(2 / 3)
     assert s["median_gain"] == pytest.approx(0.1)
     assert s["seconds"] == [10.0, 30.0] and s["load"] == 2.0
+
+
+def test_damping_terms_in_si():
+    """Both damping terms of a law in SI: N s/m = c k / omega0, length = z_b L, and the ratio
+    to the lever's own damping k / (omega0 Q) is c Q; a term that is off is left out."""
+    curve = Curve(tau=np.arange(3.0), amplitude=np.ones(3), phase=np.full(3, math.pi / 2),
+                  z_piezo=np.array([3.0, 2.0, 1.0]), segment=np.zeros(3, dtype=np.int8),
+                  quality_factor=200.0, spring_constant_n_per_m=2.0,
+                  resonance_frequency_hz=7e4, length_m=20e-9, drive_frequency_hz=7e4)
+    law = CurveLaw(a0=0.015, damping=1e-2, decay_length=0.05, far_damping=2.5e-4,
+                   far_decay_length=25.0)
+    near, far = damping_terms_si(law, curve)
+    w0 = 2 * math.pi * 7e4
+    assert near["term"] == "near" and far["term"] == "far"
+    assert near["coefficient_n_s_per_m"] == pytest.approx(1e-2 * 2.0 / w0)
+    assert near["decay_length_m"] == pytest.approx(1e-9)
+    assert far["decay_length_m"] == pytest.approx(500e-9)
+    assert far["times_lever_damping"] == pytest.approx(0.05)
+    # the lever's own damping k / (omega0 Q) in N s/m, the ratio's reference
+    assert far["coefficient_n_s_per_m"] / far["times_lever_damping"] == pytest.approx(
+        2.0 / (w0 * 200.0))
+    assert [t["term"] for t in damping_terms_si(law.replace(damping=0.0), curve)] == ["far"]
