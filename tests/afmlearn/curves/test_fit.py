@@ -43,6 +43,8 @@ def synthetic(law, *, seed=0, periods=600.0, n=240, drift=0.0, offset=0.3, noise
 
 
 TRUTH = CurveLaw(a0=0.015, vdw=1.5e-5, stiffness=15.0)
+#: weak far-field damping (decay over two free amplitudes)
+FAR_DAMPED = TRUTH.replace(damping=1e-3, decay_length=2.0)
 
 
 def test_baseline_fit_recovers_the_law_and_the_surface():
@@ -88,14 +90,16 @@ def test_conservative_law_dissipates_nothing():
     ("none", TRUTH, 0.0),
     # far-field damping (decay over two free amplitudes); a decay of 0.3 free amplitudes,
     # active only near contact, was named viscoelastic (measured confusion)
-    pytest.param("long_range_damping", TRUTH.replace(damping=1e-3, decay_length=2.0), 0.0,
+    ("long_range_damping", FAR_DAMPED.replace(damping=1e-2), 0.0),
+    pytest.param("long_range_damping", FAR_DAMPED, 0.0,
                  marks=pytest.mark.xfail(strict=True, reason=(
-                     "measured: named none. The baseline refined from the true surface and "
-                     "attraction reaches chi2 188 on 240 residuals (the damping is nearly "
-                     "invisible here) but the diagnoser's baseline stops at 2468, with the "
-                     "drive frequency 9e-5 above that refit's: the far-field damping biases "
-                     "the free phase and the start grids hold the drive frequency fixed "
-                     "(docs/curves.md, Limits)"))),
+                     "measured: named viscoelastic (evidence 23.6; damping 5.9). Not the "
+                     "optimiser any more (the baseline reaches the truth-started chi2 188, "
+                     "see test_far_field_damping_baseline_reaches_the_truths_basin): the "
+                     "true law's own damping fit reaches chi2 168, evidence 240 ln(188/168) "
+                     "- 4 ln 240 = 5 < 10 with the two-term (4-parameter) damping hypothesis, "
+                     "while one viscoelastic parameter mimics it (chi2 167): this weak far "
+                     "damping is not identifiable on one approach (docs/curves.md, Limits)"))),
     ("viscoelastic", TRUTH.replace(visco=2.0), 0.0),
 ])
 def test_diagnoser_names_the_hidden_cause(cause, law, drift):
@@ -104,6 +108,21 @@ def test_diagnoser_names_the_hidden_cause(cause, law, drift):
     assert diag.cause_ == cause
     if cause != "none":
         assert diag.gain_ > 0.0
+
+
+def test_far_field_damping_baseline_reaches_the_truths_basin():
+    # the baseline used to stop at chi2 2468 (stiffness 113) on this curve while the baseline
+    # refined from the true law reaches 188 (stiffness 15): the coarse start grid held the
+    # contact stiffness in whole decades, beside the narrow diagonal valley
+    curve = synthetic(FAR_DAMPED, seed=3)
+    scale = curve.length_m / LENGTH
+    truth = {"offset": 1.3 / scale, "omega": 1.0, "vdw": TRUTH.vdw / scale**3,
+             "stiffness": TRUTH.stiffness * scale**0.5}
+    ref = CurveFitter(a0_m=0.015 * LENGTH, start=truth, rescales=((1.0, 1.0),),
+                      max_nfev=30).fit(curve)
+    fit = CurveFitter(a0_m=0.015 * LENGTH).fit(curve)
+    assert fit.chi2_ < 1.02 * ref.chi2_
+    assert fit.law_.stiffness == pytest.approx(ref.law_.stiffness, rel=0.2)
 
 
 def test_evaluation_budget_is_respected():
