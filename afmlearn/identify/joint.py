@@ -675,16 +675,14 @@ def _later_terms(cands: list[Candidate], knee: int, library: AFMLibrary, n_lin: 
 def _dominant_exponent(problem: JointProblem, lib: AFMLibrary, a0: float, coef: FloatArray
                        ) -> float | None:
     """Exponent of the ``delta^p`` term with the largest RMS contribution on the orbits."""
-    from .library import TermInput
 
     best, expo = 0.0, None
     cf = coef[problem.n_lin:]
     for j, t in enumerate(lib.terms):
         if not isinstance(t, Indentation) or cf[j] == 0:
             continue
-        v = np.concatenate([t.evaluate(TermInput(z=o.gap - o.denoised.x, zdot=-o.denoised.v,
-                                                 x=o.denoised.x, a0=a0))
-                            for o in problem.observations])
+        v = np.concatenate([t.evaluate(ti)
+                            for ti in problem.orbit_inputs(a0, offsets=False)])
         contrib = abs(cf[j]) * float(np.sqrt(np.mean(v**2)))
         if contrib > best:
             best, expo = contrib, float(t.p)

@@ -45,7 +45,7 @@ from afmlearn.preprocess import fit_harmonics
 from afmlearn.preprocess.phase import align_phase, wrap_angle
 
 from ._simulate import simulate_period
-from .library import AFMLibrary, Indentation, TermInput
+from .library import AFMLibrary, Indentation
 from .problem import N_LEVER, JointProblem
 
 __all__ = ["MeasuredHarmonics", "OutputErrorFit", "OutputErrorLaw", "OutputErrorProfile",
@@ -155,35 +155,39 @@ def periodic_orbit(state: FloatArray, *, n_out: int, substeps: int, gap: float, 
 
 def _shoot(pmap: Any, s: FloatArray, J: FloatArray | None, max_iter: int, tol: float
            ) -> tuple[FloatArray, FloatArray, FloatArray | None, bool]:
+    # the state is two numbers: plain float arithmetic (numpy's per-call overhead on 2-vectors
+    # was most of the shooting's Python time); the 2 x 2 Newton step by Cramer's rule
     last = math.inf
     for _ in range(max_iter):
         xs, ps = pmap(s)
-        r = ps - s
-        if not np.all(np.isfinite(r)):
+        r0, r1 = float(ps[0] - s[0]), float(ps[1] - s[1])
+        if not (math.isfinite(r0) and math.isfinite(r1)):
             return xs, s, None, False
-        scale = max(float(np.max(np.abs(s))), 1e-3)
-        err = float(np.max(np.abs(r)))
+        scale = max(abs(float(s[0])), abs(float(s[1])), 1e-3)
+        err = max(abs(r0), abs(r1))
         if err < tol * scale:
             return xs, s, J, True
         if J is None or err > 0.1 * last:
             J = np.empty((2, 2))
+            h = 1e-7 * scale
             for j in range(2):
-                h = 1e-7 * scale
                 sp = s.copy()
                 sp[j] += h
                 J[:, j] = (pmap(sp)[1] - ps) / h
         last = err
-        try:
-            step = np.linalg.solve(J - np.eye(2), -r)
-        except np.linalg.LinAlgError:
+        a, b, c, d = J[0, 0] - 1.0, J[0, 1], J[1, 0], J[1, 1] - 1.0
+        det = a * d - b * c
+        if not math.isfinite(det) or abs(det) <= 1e-14 * max(abs(a * d), abs(b * c), 1e-300):
             return xs, s, None, False
-        m = float(np.max(np.abs(step)))
+        st0, st1 = (-r0 * d + b * r1) / det, (-a * r1 + c * r0) / det
+        m = max(abs(st0), abs(st1))
         if m > 0.2 * scale:
-            step *= 0.2 * scale / m
-        s = s + step
+            st0, st1 = st0 * 0.2 * scale / m, st1 * 0.2 * scale / m
+        s = np.array([s[0] + st0, s[1] + st1])
     xs, ps = pmap(s)
-    ok = bool(np.all(np.isfinite(ps))) and float(np.max(np.abs(ps - s))) < 1e-6 * max(
-        float(np.max(np.abs(s))), 1e-3)
+    e0, e1 = float(ps[0] - s[0]), float(ps[1] - s[1])
+    ok = math.isfinite(e0) and math.isfinite(e1) and max(abs(e0), abs(e1)) < 1e-6 * max(
+        abs(float(s[0])), abs(float(s[1])), 1e-3)
     return xs, s, J, ok
 
 
@@ -411,8 +415,7 @@ def _typical(problem: JointProblem, law: OutputErrorLaw, u: FloatArray) -> Float
     out[:h] = np.where(out[:h] > 0, out[:h], head)
     if law.library.n_terms:
         lib = law.library_at(u)
-        ins = [TermInput(z=o.gap - o.denoised.x, zdot=-o.denoised.v, x=o.denoised.x,
-                         a0=float(u[3])) for o in problem.observations]
+        ins = problem.orbit_inputs(float(u[3]), offsets=False)
         th = np.concatenate([lib.evaluate(t) for t in ins])
         f_rms = float(np.sqrt(np.mean((th @ u[h:]) ** 2))) or 1e-3
         t_rms = np.sqrt(np.mean(th**2, axis=0))
@@ -696,8 +699,7 @@ def _small(problem: JointProblem, res: OutputErrorResult, terms: list[Any]) -> F
     """Start coefficients of added ``terms``: 5 % of the law's RMS force on the denoised
     orbits each, with the term's physical sign (a start ON a sign bound can stay there)."""
     lib, a0, c = res.library, res.a0, res.u[res.law.n_head:]
-    ins = [TermInput(z=o.gap - o.denoised.x, zdot=-o.denoised.v, x=o.denoised.x, a0=a0)
-           for o in problem.observations]
+    ins = problem.orbit_inputs(a0, offsets=False)
     f_rms = float(np.sqrt(np.mean(np.concatenate([lib.evaluate(t) @ c for t in ins]) ** 2)))
     extra = AFMLibrary(list(terms))
     t_rms = np.sqrt(np.mean(np.concatenate([extra.evaluate(t) for t in ins]) ** 2, axis=0))

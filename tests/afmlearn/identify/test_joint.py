@@ -15,7 +15,7 @@ from afmlearn.identify.drive import FittedPhase, RecordedPhase
 from afmlearn.identify.identifier import ForceIdentifier
 from afmlearn.identify.joint import ExponentProfile, support_fit
 from afmlearn.identify.joint_outputs import format_exponent
-from afmlearn.identify.library import AFMLibrary, Indentation, InversePower
+from afmlearn.identify.library import AFMLibrary, Indentation, InversePower, TermInput
 from afmlearn.identify.problem import build_problem
 from afmlearn.identify.projection import HarmonicBalance
 from afmlearn.identify.selection import profile_interval
@@ -73,6 +73,27 @@ def test_rows_of_one_observation_are_its_harmonic_balance(series_path: Path) -> 
     lib = AFMLibrary([Indentation(1.5)])
     np.testing.assert_allclose(one.force_columns(lib, 0.03),
                                o.bound.force_columns(lib, 0.03) / o.row_sigma)
+
+
+def test_threshold_pattern_over_whole_periods_is_the_record_rms(series_path: Path,
+                                                                 monkeypatch) -> None:
+    """Reference: the terms' RMS over the whole denoised record (40 periods); the pattern
+    reads whole periods only (here 10, ``ORBIT_SAMPLES`` lowered): the orbit is periodic."""
+    from afmlearn.identify import problem as problem_mod
+
+    pb = _problem(Experiment.read(series_path))
+    pb = pb.with_offsets(np.linspace(-0.002, 0.002, pb.n_obs))
+    lib = AFMLibrary.standard()
+    a0 = 0.03
+    ref = np.sqrt(np.mean(np.concatenate([
+        lib.evaluate(TermInput(z=o.gap + d - o.denoised.x, zdot=-o.denoised.v,
+                               x=o.denoised.x, a0=a0))
+        for o, d in zip(pb.observations, pb.offsets, strict=True)]) ** 2, axis=0))
+    monkeypatch.setattr(problem_mod, "ORBIT_SAMPLES", 1000)
+    assert sum(t.x.size for t in pb.orbit_inputs(a0)) == 1000 * pb.n_obs  # 10 periods each
+    pat = pb.design(lib, a0).pattern[pb.n_lin:]
+    np.testing.assert_allclose(pat, np.where(ref > 0, 1 / np.where(ref > 0, ref, 1), 0),
+                               rtol=2e-3)
 
 
 def test_common_unit_makes_one_law_fit_every_row(series_path: Path) -> None:
