@@ -86,8 +86,21 @@ def test_joint_fit_recovers_the_shared_law_from_a_perturbed_start():
              "curves": [{"offset": 1.03, "omega": 1.0}] * 3}
     fit = GroupFitter(hypothesis=DAMPING, start=start, rescales=((1.0, 1.0),),
                       max_nfev=30).fit(curves)
-    assert fit.law_.damping == pytest.approx(truth.damping, rel=0.15)
+    # the fit reaches the truth's basin (its chi2 at or below the true law's)
+    x_true = fit._encode({"law": {"vdw": truth.vdw, "stiffness": truth.stiffness,
+                                  "damping": truth.damping,
+                                  "decay_length": truth.decay_length, "far_damping": 1e-8},
+                          "curves": [{"offset": 1.0, "omega": 1.0}] * 3})
+    assert fit.chi2_ <= 1.01 * fit._cost(x_true)
+    # the damping hypothesis has a near and a far term (4 parameters, be83a6b): the noise
+    # trades the near coefficient against its decay (measured: 0.00235 / 0.144 against 0.002 /
+    # 0.162, chi2 1277 below the truth's 1284); their product, the loss, is tight, the far
+    # term stays off
+    assert fit.law_.damping * fit.law_.decay_length == pytest.approx(
+        truth.damping * truth.decay_length, rel=0.1)
+    assert fit.law_.damping == pytest.approx(truth.damping, rel=0.25)
     assert fit.law_.decay_length == pytest.approx(truth.decay_length, rel=0.15)
+    assert fit.law_.far_damping < 0.01 * fit.law_.damping
     for cv in fit.values_["curves"]:
         assert cv["offset"] == pytest.approx(1.0, abs=0.01)
     # at the noise level: chi2 per residual near 1
