@@ -14,6 +14,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -152,8 +153,9 @@ def scan_starts(oe: OutputError, jb: JointBalance, base_hb: Solution, current: S
                 hyp: AbstractHypothesis, ctx: Context, n: int) -> list[Solution]:
     """Output-error starts from the extension's grid: the ``n`` best grid points by equation
     error (one per value of the first parameter), each placed on ``current``'s point (its
-    ``a0`` and coefficients; new columns at zero) and scored by output error (``chi2`` of the
-    returned solutions; best first).
+    ``a0`` and coefficients; the new force columns at the grid point's equation-error values,
+    a contact term switched off moved off its bound, :func:`_off_bound`) and scored by
+    output error (``chi2`` of the returned solutions; best first).
 
     For a second mode the equation error ranks the frequency ratio wrongly: it runs the force
     through the measured orbit, in which a weakly damped mode near a harmonic of the drive
@@ -166,26 +168,51 @@ def scan_starts(oe: OutputError, jb: JointBalance, base_hb: Solution, current: S
     for vals in itertools.product(*[p.grid for p in params]):
         s = jb.solve(hyp.extend(base_hb.spec, vals), base_hb.phases, (base_hb.spec.a0, *vals),
                      project=1)
-        scored.append((s.chi2, vals))
+        scored.append((s.chi2, vals, s))
     scored.sort(key=lambda t: t[0])
     build, _ = structure(hyp, current.spec, ctx)
-    seen: set[float] = set()
+    seen: set[float | None] = set()
     out = []
-    for _, vals in scored:
+    for _, vals, ee in scored:
         if len(out) >= n:
             break
-        if vals[0] in seen:
+        first = vals[0] if vals else None
+        if first in seen:
             continue
-        seen.add(vals[0])
+        seen.add(first)
         v = (current.values[0], *vals)
         spec = build(v)
-        coef = spec.embed(current.spec, current.coef)
+        coef = _off_bound(spec, spec.embed(current.spec, current.coef))
+        new_keys = set(spec.term_keys()) - set(current.spec.term_keys())
+        theirs = ee.spec.term_keys()
+        for j, key in enumerate(spec.term_keys()):
+            if key in new_keys and key in theirs:
+                coef[3 + j] = ee.coef[3 + theirs.index(key)]
         r, ok, phases = oe.residual(spec, coef)
         if not ok:
             continue
         out.append(Solution(spec=spec, coef=coef, residual=r, chi2=float(r @ r), values=v,
                             phases=tuple(phases)))
     out.sort(key=lambda s: s.chi2)
+    return out
+
+
+def _off_bound(spec: ModelSpec, coef: np.ndarray, *, rel: float = 1e-3) -> np.ndarray:
+    """``coef`` with the contact term moved off its bound: a contact coefficient below ``rel``
+    times the lever stiffness ``K`` (the scale of a contact stiffness in units of ``k``) is
+    set to that.
+
+    The output-error refinement does not leave a coefficient at its bound 0: its
+    finite-difference step is relative to the (scaled) start, so such a coefficient is probed
+    by ~1e-10, below the shooting tolerance, and stays switched off. Measured on a strong
+    long-range-damping series (damping 8x the lever's, 4 set-points): the baseline ends with
+    its contact term at 0, and the damping extension started from the truth's ``a0`` and decay
+    length with the contact at 0 ends at chi2 165 with the contact still off and ``a0`` tripled,
+    with the contact at 1e-3 at 132 (the generating model refitted: 132).
+    """
+    out = np.array(coef, float)
+    j = spec.term_keys().index("contact")
+    out[3 + j] = max(float(out[3 + j]), rel * (abs(float(out[0])) or 1.0))
     return out
 
 
@@ -215,7 +242,7 @@ def structure(hyp: AbstractHypothesis | None, spec0: ModelSpec, ctx: Context
 
 def refine_output_error(oe: OutputError, starts: Sequence[Solution],
                         hyp: AbstractHypothesis | None, base: Solution, ctx: Context, *,
-                        max_nfev: int = 25, nested: str = "always"
+                        max_nfev: int = 25, nested: str = "always", warm: Any = None
                         ) -> tuple[Solution, bool, Build, list[Parameter]]:
     """Output-error refinement from each start; the best refined solution.
 
@@ -224,7 +251,9 @@ def refine_output_error(oe: OutputError, starts: Sequence[Solution],
     contains the base, cannot end worse than it: refined always (``nested="always"``), or
     only when the other starts end no better than the base (``"fallback"``: saves a
     refinement per cause on joint fits). Returns the solution, whether every orbit
-    converged, and the structure (``build``, parameters) it was refined in.
+    converged, and the structure (``build``, parameters) it was refined in. ``warm`` (an
+    :meth:`OutputError.snapshot`): every start is shot from those orbits, not from the ones
+    the start refined before it left (the result then does not depend on the starts' order).
     """
     build, params = structure(hyp, base.spec, ctx)
     starts = list(starts)
@@ -240,6 +269,8 @@ def refine_output_error(oe: OutputError, starts: Sequence[Solution],
             starts.append(fallback)
     best: tuple[Solution, bool] | None = None
     for start in starts:
+        if warm is not None:
+            oe.restore(warm)
         out, ok = oe.refine(start, build, params, max_nfev=max_nfev)
         if best is None or out.chi2 < best[0].chi2:
             best = (out, ok)
@@ -267,6 +298,8 @@ def refine_output_error(oe: OutputError, starts: Sequence[Solution],
             mixed.insert(0, Solution(spec=build(vals), coef=coef, residual=base.residual,
                                      chi2=base.chi2, values=vals, phases=base.phases))
         for start in mixed:
+            if warm is not None:
+                oe.restore(warm)
             out, ok = oe.refine(start, build, params, max_nfev=max_nfev)
             if out.chi2 < best[0].chi2:
                 best = (out, ok)

@@ -112,6 +112,9 @@ class AbstractHypothesis(abc.ABC):
     #: best becoming the start when it beats the equation-error start (``fit.scan_starts``;
     #: 0: none)
     output_error_scan: ClassVar[int] = 0
+    #: with a scan: refine both the equation-error start and the scan's best, keep the better
+    #: (False: only the one with the lower output error before refinement)
+    refine_both_starts: ClassVar[bool] = False
 
     @abc.abstractmethod
     def parameters(self, ctx: Context) -> list[Parameter]:
