@@ -64,7 +64,7 @@ from .heldout import HeldOut, phase_for, sample_orbit, steady_output
 from .hypotheses import AbstractHypothesis, Context, Parameter, default_hypotheses
 from .joint import JointBalance
 from .model import DiagnosisModel
-from .observation import Observation, as_traces, build_observations, folds
+from .observation import Observation, as_traces, build_observations, drive_groups, folds
 from .output_error import OutputError
 
 logger = logging.getLogger(__name__)
@@ -452,17 +452,19 @@ class Diagnoser:
         if cal0.excitation == "base":
             self.warnings_.append("base excitation: the dither's own share of the gap is "
                                   "neglected")
-        fcs = [o.cal.drive_amplitude for o in obs if o.cal.drive_amplitude is not None]
-        drive = float(np.median(fcs)) if fcs else None
-        if drive is None:
+        # one drive amplitude B per drive group (records at different free amplitudes; one
+        # group, the median F_c, when they share it: docs/diagnose.md "Several free amplitudes")
+        groups, group_fc = drive_groups(obs)
+        if all(fc is None for fc in group_fc):
             self.warnings_.append("no free data: the drive amplitude is unconstrained, so "
                                   "dissipation is only seen through harmonics (weak)")
         # -- spans, denoised orbits, the joint balance
         self._log(f"denoising {n_obs} observation(s)")
         spans = [self._span(o, single) for o in obs]
-        orbits = [self._orbit(o, s, drive) for o, s in zip(obs, spans, strict=True)]
+        orbits = [self._orbit(o, s, group_fc[g])
+                  for o, s, g in zip(obs, spans, groups, strict=True)]
         hbs = [HarmonicBalance(orb) for orb in orbits]
-        jb = JointBalance(hbs, [o.phase_prior for o in obs])
+        jb = JointBalance(hbs, [o.phase_prior for o in obs], groups=groups)
         self.free_harmonics_ = (_free_harmonics(obs[0].trace.free_deflection_m, cal0)
                                 if obs[0].trace.free_deflection_m is not None else None)
         zs = [orb.gap - orb.y for orb in orbits]

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +35,7 @@ from afmlearn.preprocess import checked_row
 from .diagnoser import Diagnoser
 from .hypotheses import default_hypotheses
 from .model import DiagnosisModel
+from .observation import read_experiment
 
 __all__ = ["diagnose_trace", "report_record", "REPORT_FORMAT", "FigureWriter"]
 
@@ -47,15 +48,19 @@ _NONE_TEXT = ("the baseline (one mode, VdW-DMT sphere contact) explains the reco
               "its noise")
 
 
-def diagnose_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
+def diagnose_trace(path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
+                   out_dir: str | os.PathLike[str], *,
                    row: int | None = None, diagnoser: Diagnoser | None = None,
                    figures: FigureWriter | None = None) -> dict[str, Any]:
     """Diagnose one trace file (its experiment, or one row) and write the report.
 
     Parameters
     ----------
-    path : str or os.PathLike
-        Trace file, format v1. Its ``/labels`` group is never read.
+    path : str or os.PathLike, or a sequence of them
+        Trace file, format v1. Its ``/labels`` group is never read. Several files of one
+        tip (e.g. set-point series at two free amplitudes) are one experiment
+        (:func:`~afmlearn.diagnose.observation.read_experiment`; ``row`` must be None);
+        the report's ``input`` is then the list of files.
     out_dir : str or os.PathLike
         Output folder (created if missing); existing report files are replaced.
     row : int, optional
@@ -80,29 +85,40 @@ def diagnose_trace(path: str | os.PathLike[str], out_dir: str | os.PathLike[str]
     afmlearn.preprocess.InputError
         NaN / inf, < 20 samples per period, too short, clipped (a ValueError).
     ValueError
-        ``row`` missing for a sweep or out of range, bad settings.
+        ``row`` missing for a sweep or out of range, bad settings, files that are not one
+        cantilever's.
     """
     t0 = time.perf_counter()
-    path = Path(path)
     out = Path(out_dir)
-    trace = read_trace(path)                          # labels=False: /labels never opened
-    if trace.is_sweep or not trace.has_rows:
-        row = checked_row(trace, row)
-    elif row is not None and (isinstance(row, bool) or not isinstance(row, int)
-                              or not 0 <= row < trace.n_points):
-        raise ValueError(f"row must be null (every set-point) or an integer in "
-                         f"[0, {trace.n_points}), got {row!r}")
+    data: Any
+    if isinstance(path, (str, os.PathLike)):
+        path = Path(path)
+        data = read_trace(path)                       # labels=False: /labels never opened
+        if data.is_sweep or not data.has_rows:
+            row = checked_row(data, row)
+        elif row is not None and (isinstance(row, bool) or not isinstance(row, int)
+                                  or not 0 <= row < data.n_points):
+            raise ValueError(f"row must be null (every set-point) or an integer in "
+                             f"[0, {data.n_points}), got {row!r}")
+    else:                                             # files of one tip: one experiment
+        if row is not None:
+            raise ValueError(f"row must be null when several files are diagnosed, got {row!r}")
+        data = read_experiment(path)                  # labels never opened
     dg = diagnoser if diagnoser is not None else Diagnoser()
     if not isinstance(dg, Diagnoser):
         raise ValueError(f"diagnoser must be a Diagnoser, got {type(dg).__name__}")
     if figures is not None and not callable(figures):
         raise ValueError(f"figures must be None or a callable (diagnoser, out_dir) -> "
                          f"dict, got {figures!r}")
-    dg.fit(trace, row=row)
+    dg.fit(data, row=row)
     out.mkdir(parents=True, exist_ok=True)
     figs: dict[str, Path] = figures(dg, out) if figures is not None else {}
-    rec = report_record(dg, input_path=path, row=row, figures=[p.name for p in figs.values()],
+    paths = [path] if isinstance(path, Path) else [Path(p) for p in path]
+    rec = report_record(dg, input_path=paths[0], row=row,
+                        figures=[p.name for p in figs.values()],
                         runtime_s=time.perf_counter() - t0)
+    if not isinstance(path, Path):
+        rec["input"] = [str(p.resolve()) for p in paths]
     write_json(out / "report.json", rec)
     _write_text(out / "report.md", report_markdown(rec, figs))
     return {**rec, "diagnoser": dg}
@@ -199,7 +215,9 @@ def report_markdown(rec: dict[str, Any], figs: dict[str, Path]) -> str:
     """``report.md``: the verdict, the two equations, the candidates table, the figures."""
     cause = rec["cause"]
     b, e = rec["baseline"], rec["extended"]
-    lines = [f"# Diagnosis of `{Path(rec['input']).name}`", ""]
+    names = ([Path(p).name for p in rec["input"]] if isinstance(rec["input"], list)
+             else [Path(rec["input"]).name])
+    lines = [f"# Diagnosis of {' + '.join(f'`{n}`' for n in names)}", ""]
     if cause == "none":
         lines.append(f"**Cause: none** -- {rec['explanation']} (confidence "
                      f"{rec['confidence']:.2f}).")
