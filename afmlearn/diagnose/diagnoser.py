@@ -673,11 +673,13 @@ class Diagnoser:
                     r0 = oe.residual(starts[0].spec, starts[0].coef)[0]
                     scanned = scan_starts(oe, jb, current.hb, current.sol, h, ctx,
                                           h.output_error_scan)
-                    if scanned and scanned[0].chi2 < float(r0 @ r0):
+                    if scanned and h.refine_both_starts:
+                        first = [starts[0], scanned[0]]
+                    elif scanned and scanned[0].chi2 < float(r0 @ r0):
                         first = scanned[:1]
                 sol, _, build, params = refine_output_error(
                     oe, first, h, current.sol, ctx, max_nfev=self.joint_nfev,
-                    nested="fallback")
+                    nested="fallback", warm=current.warm if len(first) > 1 else None)
         key = h.cause if current.key == "none" else f"{current.key}+{h.cause}"
         fit = _Fit(sol, starts[0], build, params, key, np.full(jb.n_obs, np.nan),
                    oe.snapshot())
