@@ -111,18 +111,30 @@ class NullCalibration:
     source: str = ""
 
     @classmethod
-    def default(cls, kind: Literal["single", "series"] = "single") -> NullCalibration:
+    def default(cls, kind: Literal["single", "series", "series_amplitudes"] = "single"
+                ) -> NullCalibration:
         """The calibration shipped with afmlearn (``null_calibration.json``).
 
         ``kind="series"`` reads its ``"series"`` section (thresholds calibrated on null
         set-point series, whose statistic is the joint chi-square drop) when there is one,
-        else the single-record thresholds (and says so in ``source``).
+        else the single-record thresholds. ``kind="series_amplitudes"`` (series at several
+        free amplitudes: several drive groups) reads its ``"series_amplitudes"`` section,
+        else falls back to ``"series"``, then to the single-record thresholds. A fallback is
+        said in ``source``.
         """
-        if kind not in ("single", "series"):
-            raise ValueError(f"kind must be 'single' or 'series', got {kind!r}")
+        kinds = ("single", "series", "series_amplitudes")
+        if kind not in kinds:
+            raise ValueError(f"kind must be one of {kinds}, got {kind!r}")
         text = resources.files("afmlearn.diagnose").joinpath("null_calibration.json").read_text()
         d = json.loads(text)
         note = ""
+        if kind == "series_amplitudes":
+            if isinstance(d.get("series_amplitudes"), dict):
+                d = d["series_amplitudes"]
+            else:
+                note = (" [one-amplitude series thresholds: no several-amplitude calibration "
+                        "shipped]")
+                kind = "series"
         if kind == "series":
             if isinstance(d.get("series"), dict):
                 d = d["series"]
@@ -442,10 +454,6 @@ class Diagnoser:
                                  max_windows=self.max_ramp_windows, warnings=self.warnings_)
         n_obs = len(obs)
         single = n_obs == 1
-        calib = self.calibration or NullCalibration.default("single" if single else "series")
-        if not isinstance(calib, NullCalibration):
-            raise ValueError(f"calibration must be a NullCalibration, got {calib!r}")
-        self.calibration_ = calib
         cal0 = obs[0].cal
         if cal0.excitation_assumed:
             self.warnings_.append("excitation not recorded in the file: tip excitation assumed")
@@ -455,6 +463,14 @@ class Diagnoser:
         # one drive amplitude B per drive group (records at different free amplitudes; one
         # group, the median F_c, when they share it: docs/diagnose.md "Several free amplitudes")
         groups, group_fc = drive_groups(obs)
+        # null thresholds of the design: one record, a series, a series at several free
+        # amplitudes (several drive groups; its own section of null_calibration.json)
+        kind = ("single" if single else
+                "series_amplitudes" if len(set(groups)) > 1 else "series")
+        calib = self.calibration or NullCalibration.default(kind)
+        if not isinstance(calib, NullCalibration):
+            raise ValueError(f"calibration must be a NullCalibration, got {calib!r}")
+        self.calibration_ = calib
         if all(fc is None for fc in group_fc):
             self.warnings_.append("no free data: the drive amplitude is unconstrained, so "
                                   "dissipation is only seen through harmonics (weak)")

@@ -223,6 +223,33 @@ def test_two_effects_are_named_step_by_step(make_series):
     assert (dg.extended_.spec.visco_exponent, dg.extended_.spec.damping_decay) != (None, None)
 
 
+def test_null_calibration_is_chosen_by_the_design(monkeypatch, tmp_path):
+    """Series at several free amplitudes read their own null thresholds, else the one-amplitude
+    series' (and the report's source says so), else the single-record ones."""
+    import afmlearn.diagnose.diagnoser as dmod
+
+    class _Files:
+        def files(self, package):
+            return tmp_path
+
+    monkeypatch.setattr(dmod, "resources", _Files())
+    single = {"thresholds": {"viscoelastic": 1.0}, "min_gain": 0.05, "source": "one"}
+    series = {"thresholds": {"viscoelastic": 2.0}, "min_gain": 0.05, "source": "ser"}
+    amps = {"thresholds": {"viscoelastic": 3.0}, "min_gain": 0.05, "source": "amp"}
+    path = tmp_path / "null_calibration.json"
+    path.write_text(json.dumps({**single, "series": series, "series_amplitudes": amps}))
+    assert NullCalibration.default("series_amplitudes").threshold("viscoelastic") == 3.0
+    assert NullCalibration.default("series").threshold("viscoelastic") == 2.0
+    path.write_text(json.dumps({**single, "series": series}))
+    cal = NullCalibration.default("series_amplitudes")
+    assert cal.threshold("viscoelastic") == 2.0 and "no several-amplitude" in cal.source
+    path.write_text(json.dumps(single))
+    cal = NullCalibration.default("series_amplitudes")
+    assert cal.threshold("viscoelastic") == 1.0 and "no series calibration" in cal.source
+    with pytest.raises(ValueError, match="series_amplitudes"):
+        NullCalibration.default("two")
+
+
 def test_outcome_does_not_depend_on_the_order_of_the_causes(make_series):
     """The same draw with the causes tried in two orders: the same causes named and the same
     first-step evidence per cause (each candidate is shot from the current model's own orbits,
