@@ -807,7 +807,7 @@ def null_table(nulls: list[dict]) -> str:
         # the calibration's own nulls (set_id 5) are in-sample for the thresholds they set:
         # listed apart, never pooled with the evaluation's
         groups.setdefault((r["spp"], r["noise"], *_variant(r),
-                           r.get("set_id") in (5, 6)), []).append(r)
+                           r.get("set_id") if r.get("set_id") in (5, 6) else 0), []).append(r)
     rows = []
     split: list[tuple[tuple, list[dict]]] = []
     for g, rs in sorted(groups.items(), reverse=True):
@@ -824,7 +824,8 @@ def null_table(nulls: list[dict]) -> str:
         above = sum(any(c["delta_chi2"] > c["threshold"] for c in r["candidates"]) for r in ok)
         ratio = [max(c["delta_chi2"] / c["threshold"] for c in r["candidates"]) for r in ok]
         rows.append([f"{spp} spp, {100 * noise:g} %", _vname((n_pts, phase, design))
-                     + (" (calibration nulls: in-sample)" if cal else ""),
+                     + {5: " (calibration nulls: in-sample)",
+                        6: " (`--design two` calibration nulls)"}.get(cal, ""),
                      str(len(rs)), f"{k}/{len(rs)}",
                      f"{100 * upper_bound(k, len(rs)):.1f} %", f"{above}/{len(ok)}",
                      fmt(float(np.median(ratio)), 2) if ratio else "-",
