@@ -32,7 +32,8 @@ def test_two_files_are_one_experiment(tmp_path, files, run_script):
     out = tmp_path / "out"
     code, stdout, err = run_script("diagnose.py", f"trace=[{paths[0]},{paths[1]}]",
                                    f"out_dir={out}", "figures=false",
-                                   "diagnoser.max_causes=1")
+                                   "diagnoser.hypotheses=[{_target_:afmlearn.diagnose."
+                                   "hypotheses.Electrostatic}]")
     assert code == 0, err
     rep = json.loads((out / "report.json").read_text())
     assert rep["input"] == [str(p.resolve()) for p in paths]
