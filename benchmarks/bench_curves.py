@@ -575,8 +575,11 @@ def run_groups(args, info: dict) -> int:
             print(f"joint oracle {r['cause']:>20s} #{r['index']}: evidence {o['evidence']}",
                   flush=True)
     oracles = {(o["cause"], o["index"]): o for o in load(opath) if same(o)}
-    write_section("curve_groups", "Lock-in curves: joint fit across free amplitudes vs "
-                  "single curves (`bench_curves.py --group`)",
+    # another amplitude span gets its own section (the default span's results stay)
+    wide = args.span != GROUP_FREE
+    write_section("curve_groups_wide" if wide else "curve_groups",
+                  "Lock-in curves: joint fit across free amplitudes vs single curves "
+                  f"(`bench_curves.py --group`{' --free-span' if wide else ''})",
                   group_section(recs, args, oracles), info, write=not args.no_doc)
     return 0
 
