@@ -1,9 +1,10 @@
 """`make demo`: diagnose a "measured" set-point series with a hidden effect, then tour the toolbox.
 
-The main job (issues 5 and 12): a tapping-mode experiment (dynamic spectroscopy: steady records
-at 8 rest gaps of one approach, one file) is simulated with one or two effects of the cause
-vocabulary (or none) drawn at random and kept hidden; the diagnosis (afmlearn.diagnose) reads
-the file without its labels, fits one tip-sample law to all set-points jointly, names the
+The main job (issues 5 and 12): a tapping-mode experiment (dynamic spectroscopy of one tip at
+two free amplitudes: steady records at 4 rest gaps each, one file per free amplitude) is
+simulated with one or two effects of the cause vocabulary (or none) drawn at random and kept
+hidden; the diagnosis (afmlearn.diagnose) reads both files without their labels, fits one
+tip-sample law to all set-points jointly (a drive per free amplitude), names the
 causes step by step, extends the model and measures the gain on set-points it never fitted;
 only then is the truth printed. The report goes to outputs/demo/diagnose/.
 
@@ -38,7 +39,7 @@ import numpy as np
 from hydra import compose, initialize_config_dir
 
 from afmlearn.diagnose.report import diagnose_trace
-from afmlearn.diagnose.synthetic import draw_series_case, simulate_series
+from afmlearn.diagnose.synthetic import hidden_series, series_files
 from afmlearn.identify.infer import identify_and_describe
 from afmlearn.plots import plot_sweep, plot_trace
 from afmlearn.plots.diagnose import plot_all
@@ -154,15 +155,17 @@ def main() -> None:
 def _diagnose(out: Path, seed: int | None) -> None:
     """Simulate a set-point series with hidden effects, diagnose it, then reveal the truth."""
     seed = int(np.random.SeedSequence().entropy % 2**32) if seed is None else int(seed)
-    path = out / "measured.h5"
-    print("Simulating a 'measured' set-point series with a hidden effect (8 rest gaps of one "
-          "approach, 40 periods each, 200 samples/period, 1 % noise) ...", flush=True)
-    case = draw_series_case(np.random.default_rng(seed), n_points=8)
-    simulate_series(case, path, samples_per_period=200, n_periods=40, noise_level=0.01)
-    print(f"Diagnosing {path} (all set-points jointly; the diagnosis reads no labels) ...",
-          flush=True)
+    folder = out / "measured"
+    print("Simulating a 'measured' experiment with a hidden effect: set-point series of one tip "
+          "at two free amplitudes (4 rest gaps each, 40 periods, 200 samples/period, 1 % "
+          "noise; one file per free amplitude) ...", flush=True)
+    case = hidden_series(np.random.default_rng(seed), folder, n_points=8, free_amplitudes=2,
+                         samples_per_period=200, n_periods=40, noise_level=0.01)
+    files = series_files(folder)
+    print(f"Diagnosing {' + '.join(f.name for f in files)} in {folder} (all set-points of both "
+          "files jointly; the diagnosis reads no labels) ...", flush=True)
     t = time.perf_counter()
-    rep = diagnose_trace(path, out / "diagnose", figures=plot_all)
+    rep = diagnose_trace(files, out / "diagnose", figures=plot_all)
     print(f"  diagnosed in {time.perf_counter() - t:.1f} s")
     print(f"  cause:      {rep['cause']}  (confidence {rep['confidence']:.2f})")
     for i, step in enumerate(rep.get("causes", []), 1):
