@@ -1012,10 +1012,18 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
         body += "\n\n" + args.note
     if args.note_file:
         body += "\n\n" + Path(args.note_file).read_text().strip()
-    write_section("diagnose_series", "Diagnosis on set-point series: one orbit vs 4 vs 8 "
-                  "set-points, with and without the drive phase (`bench_diagnose.py --series`)",
-                  body, info, write=not args.no_doc)
+    write_section(args.section, series_title(variants), body, info, write=not args.no_doc)
     return 0
+
+
+def series_title(variants: list[tuple[int, bool, str]]) -> str:
+    """The section title: the one-amplitude comparison (8 / 4 / 1 set-points, with and
+    without the drive phase) or, when every variant is of the two-amplitude draw, that."""
+    if variants and all(v[2] in ("two", "twin") for v in variants):
+        return ("Diagnosis on two-free-amplitude series: 2 amplitudes x 4 set-points vs the "
+                "one-amplitude twin (`bench_diagnose.py --series`)")
+    return ("Diagnosis on set-point series: one orbit vs 4 vs 8 set-points, with and without "
+            "the drive phase (`bench_diagnose.py --series`)")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -1069,6 +1077,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--snapshot", default="",
                     help="series: run on a git-archive copy of this commit (e.g. HEAD) "
                          "instead of the working tree; records name the commit")
+    ap.add_argument("--section", default="diagnose_series",
+                    help="series: the docs/benchmarks.md section written (two runs from "
+                         "different record folders keep apart, e.g. diagnose_series_2amp)")
     add_doc_flag(ap)
     args = ap.parse_args(argv)
     info = machine_info()

@@ -12,7 +12,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_diagnose import _parse_variant, calibrate, upper_bound  # noqa: E402
+from bench_diagnose import _parse_variant, calibrate, series_title, upper_bound  # noqa: E402
 
 
 def _null(drops: dict[str, float]) -> dict:
@@ -52,3 +52,10 @@ def test_variants_name_the_rows_and_the_design():
     for bad in ("3:phase", "8:yes", "8"):
         with pytest.raises(ValueError, match="--variants"):
             _parse_variant(bad)
+
+
+def test_two_amplitude_runs_have_their_own_title():
+    two = [_parse_variant("2x4:phase"), _parse_variant("twin:phase")]
+    assert "two-free-amplitude" in series_title(two)
+    assert "two-free-amplitude" not in series_title([*two, _parse_variant("8:phase")])
+    assert "two-free-amplitude" not in series_title([_parse_variant("8:phase")])
