@@ -182,7 +182,8 @@ class CurveFitter:
                               radius=self.tip_radius_m / curve.length_m)
         params = list(BASELINE.parameters)
         if self.hypothesis is not None:
-            params += list(self.hypothesis.parameters)
+            # lengths given in metres (the far-field decay) in this curve's unit
+            params += list(self.hypothesis.in_units(curve.length_m).parameters)
         self._params = params
         self.n_evaluations_ = 0
         starts = self._start(curve, params)

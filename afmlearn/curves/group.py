@@ -202,7 +202,9 @@ class GroupFitter:
         self._sigma = [tuple(max(s, f) for s, f in zip(c.noise(), _SIGMA_FLOOR, strict=True))
                        for c in curves]
         self.length_m_ = group_length(curves)
-        hyp = () if self.hypothesis is None else self.hypothesis.parameters
+        # lengths given in metres (the far-field decay) in the group's unit
+        hyp = () if self.hypothesis is None else self.hypothesis.in_units(
+            self.length_m_).parameters
         if self.fixed_law is None:
             self._base = CurveLaw(a0=self.a0_m / self.length_m_,
                                   radius=self.tip_radius_m / self.length_m_)

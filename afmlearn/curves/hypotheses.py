@@ -8,16 +8,20 @@ against the piezo during the ramp), which only curves show.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 from typing import final
 
-__all__ = ["Parameter", "Hypothesis", "BASELINE", "EXTENSIONS", "DRIFT", "FAR_OFF"]
+__all__ = ["Parameter", "Hypothesis", "BASELINE", "EXTENSIONS", "DRIFT", "FAR_OFF", "FAR_DECAY_M"]
 
 #: pseudo-field of the drift rate of the rest gap (not a law term)
 DRIFT = "drift"
 #: start of the far-field damping coefficient that leaves it practically off (a thousandth of
 #: a typical lever's own damping 1/Q ~ 5e-3)
 FAR_OFF = 1e-7
+#: start of the far-field damping's decay length [m]: a physical length (squeeze film, long-range
+#: air damping), the same at every free amplitude of one lever
+FAR_DECAY_M = 500e-9
 
 
 @final
@@ -27,6 +31,9 @@ class Parameter:
 
     ``log`` parameters are fitted as ``log10`` of the value (bounds are values, > 0);
     ``alternatives`` are further starting values tried (the best start by cost is kept).
+    ``si_length``: ``init``, ``low``, ``high`` and ``alternatives`` are lengths in metres
+    (a physical scale the free amplitude does not set, e.g. the far-field damping's decay);
+    :meth:`in_units` turns them into the fit's unit. Else they are dimensionless.
     """
 
     field: str
@@ -35,6 +42,19 @@ class Parameter:
     high: float
     log: bool = True
     alternatives: tuple[float, ...] = ()
+    si_length: bool = False
+
+    def in_units(self, length_m: float) -> Parameter:
+        """The parameter in units of ``length_m`` [m] (the curve's free amplitude or a
+        group's length unit): lengths in metres divided by it, others unchanged."""
+        if not self.si_length:
+            return self
+        if not (math.isfinite(length_m) and length_m > 0.0):
+            raise ValueError(f"length_m must be a finite length > 0 [m], got {length_m!r}")
+        return replace(self, init=self.init / length_m, low=self.low / length_m,
+                       high=self.high / length_m,
+                       alternatives=tuple(a / length_m for a in self.alternatives),
+                       si_length=False)
 
 
 @final
@@ -44,6 +64,11 @@ class Hypothesis:
 
     cause: str
     parameters: tuple[Parameter, ...]
+
+    def in_units(self, length_m: float) -> Hypothesis:
+        """The hypothesis with every parameter in units of ``length_m`` [m]
+        (:meth:`Parameter.in_units`)."""
+        return replace(self, parameters=tuple(p.in_units(length_m) for p in self.parameters))
 
 
 #: the baseline's free law parameters (starts are replaced by the fitter's scan)
@@ -56,15 +81,20 @@ EXTENSIONS: tuple[Hypothesis, ...] = (
     Hypothesis("viscoelastic", (Parameter("visco", 0.05, 1e-5, 1e3,
                                           alternatives=(0.0005, 0.005, 0.5)),)),
     # two terms of one cause (physics.md: exponential damping): a near-contact loss (decay
-    # up to 3 free amplitudes) and a far-field one (squeeze-film damping, decay 1 to 1000 free
-    # amplitudes: microns), each off or on at the start; the Asylum curves show both (A, s4)
+    # up to 3 free amplitudes) and a far-field one (squeeze-film damping), each off or on at
+    # the start; the Asylum curves show both (A, s4). The far decay is a physical length, not
+    # a multiple of the free amplitude: it starts at FAR_DECAY_M (the Asylum lever's far law
+    # decays over 440-500 nm at free amplitudes 22-55 nm; a start at 20 free amplitudes,
+    # 1.6-3.4 um at 82-172 nm, left the term off there), bounds 50 nm to 20 um. The far
+    # coefficient is in units of k / omega0, which the free amplitude does not scale either
     Hypothesis("long_range_damping", (Parameter("damping", 1e-3, 1e-7, 1e1,
                                                 alternatives=(1e-2,)),
                                       Parameter("decay_length", 0.1, 1e-3, 3.0,
                                                 alternatives=(0.03, 0.5)),
                                       Parameter("far_damping", FAR_OFF, 1e-8, 1e-1,
                                                 alternatives=(3e-4,)),
-                                      Parameter("far_decay_length", 20.0, 1.0, 1000.0))),
+                                      Parameter("far_decay_length", FAR_DECAY_M, 50e-9,
+                                                20e-6, si_length=True))),
     # the tail trades against the attraction: starts up to 100x the usual vdW scale, each
     # with the baseline's attraction rescaled (fit.RESCALES)
     Hypothesis("electrostatic", (Parameter("electrostatic", 1e-4, 1e-9, 1e0,
