@@ -70,7 +70,7 @@ from .output_error import OutputError
 logger = logging.getLogger(__name__)
 
 __all__ = ["Diagnoser", "NullCalibration", "Candidate", "Step", "HeldOut",
-           "ObservationResult", "name_cause", "tie_margin"]
+           "ObservationResult", "name_cause", "null_kind", "tie_margin"]
 
 FloatArray = NDArray[np.float64]
 
@@ -111,29 +111,33 @@ class NullCalibration:
     source: str = ""
 
     @classmethod
-    def default(cls, kind: Literal["single", "series", "series_amplitudes"] = "single"
-                ) -> NullCalibration:
+    def default(cls, kind: Literal["single", "series", "series_amplitudes",
+                                   "series_nophase"] = "single") -> NullCalibration:
         """The calibration shipped with afmlearn (``null_calibration.json``).
 
         ``kind="series"`` reads its ``"series"`` section (thresholds calibrated on null
-        set-point series, whose statistic is the joint chi-square drop) when there is one,
-        else the single-record thresholds. ``kind="series_amplitudes"`` (series at several
-        free amplitudes: several drive groups) reads its ``"series_amplitudes"`` section,
-        else falls back to ``"series"``, then to the single-record thresholds. A fallback is
-        said in ``source``.
+        set-point series with the drive phase recorded, whose statistic is the joint
+        chi-square drop) when there is one, else the single-record thresholds.
+        ``kind="series_amplitudes"`` (series at several free amplitudes: several drive
+        groups) reads its ``"series_amplitudes"`` section, ``kind="series_nophase"`` (one free
+        amplitude, drive phase not recorded: every phase fitted) its ``"series_nophase"``
+        section; either falls back to ``"series"``, then to the single-record thresholds. A
+        fallback is said in ``source``.
         """
-        kinds = ("single", "series", "series_amplitudes")
+        kinds = ("single", "series", "series_amplitudes", "series_nophase")
         if kind not in kinds:
             raise ValueError(f"kind must be one of {kinds}, got {kind!r}")
         text = resources.files("afmlearn.diagnose").joinpath("null_calibration.json").read_text()
         d = json.loads(text)
         note = ""
-        if kind == "series_amplitudes":
-            if isinstance(d.get("series_amplitudes"), dict):
-                d = d["series_amplitudes"]
+        if kind in ("series_amplitudes", "series_nophase"):
+            if isinstance(d.get(kind), dict):
+                d = d[kind]
             else:
                 note = (" [one-amplitude series thresholds: no several-amplitude calibration "
-                        "shipped]")
+                        "shipped]" if kind == "series_amplitudes" else
+                        " [recorded-phase series thresholds: no calibration without the "
+                        "drive phase shipped]")
                 kind = "series"
         if kind == "series":
             if isinstance(d.get("series"), dict):
@@ -278,7 +282,8 @@ class Diagnoser:
         Causes to test; default every cause of design.md section 3.
     calibration : NullCalibration, optional
         Significance thresholds; default :meth:`NullCalibration.default` of the experiment's
-        kind ("single" for one record, "series" for several observations).
+        design (:func:`null_kind`: one record, a series with or without its recorded drive
+        phases, a series at several free amplitudes).
     heldout_fraction : float
         One record: share of the periods at the end never used for fitting, in [0.1, 0.5].
     max_folds : int
@@ -463,10 +468,8 @@ class Diagnoser:
         # one drive amplitude B per drive group (records at different free amplitudes; one
         # group, the median F_c, when they share it: docs/diagnose.md "Several free amplitudes")
         groups, group_fc = drive_groups(obs)
-        # null thresholds of the design: one record, a series, a series at several free
-        # amplitudes (several drive groups; its own section of null_calibration.json)
-        kind = ("single" if single else
-                "series_amplitudes" if len(set(groups)) > 1 else "series")
+        kind = null_kind(n_obs, len(set(groups)),
+                         all(o.phase_prior is not None for o in obs))
         calib = self.calibration or NullCalibration.default(kind)
         if not isinstance(calib, NullCalibration):
             raise ValueError(f"calibration must be a NullCalibration, got {calib!r}")
@@ -1010,6 +1013,26 @@ class Diagnoser:
         drive = fc * np.cos(o.omega * tau - b.spec.drive_phase)
         per = 2 * np.pi / o.omega
         return float(np.mean(drive * o.ydot - o.ydot**2 / o.quality_factor) * per)
+
+
+def null_kind(n_obs: int, n_groups: int, phase_recorded: bool
+              ) -> Literal["single", "series", "series_amplitudes", "series_nophase"]:
+    """Which null thresholds a design reads (:meth:`NullCalibration.default`): one record
+    ``"single"``; several free amplitudes (drive groups) ``"series_amplitudes"``; one
+    amplitude with every drive phase recorded (and used: not under base excitation)
+    ``"series"``, else ``"series_nophase"``.
+
+    The phases matter: with them recorded the phase lag, i.e. the dissipation, is data; fitted,
+    it is one more nuisance per set-point, and the null chi-square drops differ (measured in
+    session 4 on 20 null 8-set-point series: 0/20 named with the recorded phase, 5/20 with it
+    removed from the same files, before the phases were polished by :meth:`~afmlearn.diagnose.
+    joint.JointBalance.polish_phases`).
+    """
+    if n_obs == 1:
+        return "single"
+    if n_groups > 1:
+        return "series_amplitudes"
+    return "series" if phase_recorded else "series_nophase"
 
 
 def _typical(a: FloatArray) -> float:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import h5py
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from afmlearn.diagnose import Diagnoser, NullCalibration
-from afmlearn.diagnose.diagnoser import name_cause, tie_margin
+from afmlearn.diagnose.diagnoser import name_cause, null_kind, tie_margin
 from afmlearn.diagnose.hypotheses import (
     ContactGeometry,
     DetectorNonlinearity,
@@ -248,6 +249,34 @@ def test_null_calibration_is_chosen_by_the_design(monkeypatch, tmp_path):
     assert cal.threshold("viscoelastic") == 1.0 and "no series calibration" in cal.source
     with pytest.raises(ValueError, match="series_amplitudes"):
         NullCalibration.default("two")
+    # no recorded drive phase: its own section, else the recorded-phase series' (said so)
+    nophase = {"thresholds": {"viscoelastic": 4.0}, "min_gain": 0.05, "source": "nph"}
+    path.write_text(json.dumps({**single, "series": series, "series_nophase": nophase}))
+    assert NullCalibration.default("series_nophase").threshold("viscoelastic") == 4.0
+    assert NullCalibration.default("series").threshold("viscoelastic") == 2.0
+    path.write_text(json.dumps({**single, "series": series}))
+    cal = NullCalibration.default("series_nophase")
+    assert cal.threshold("viscoelastic") == 2.0 and "without the drive phase" in cal.source
+
+
+def test_null_thresholds_follow_the_design():
+    """One record, one amplitude with / without every recorded phase, several amplitudes."""
+    assert null_kind(1, 1, True) == "single" and null_kind(1, 1, False) == "single"
+    assert null_kind(8, 1, True) == "series"
+    assert null_kind(8, 1, False) == "series_nophase"
+    assert null_kind(8, 2, True) == "series_amplitudes"
+    assert null_kind(8, 2, False) == "series_amplitudes"
+
+
+def test_a_series_without_its_phases_reads_the_nophase_thresholds(make_series):
+    """Diagnoser.fit picks the thresholds by the design: the same null file with its drive
+    phases removed reads the no-phase section (a Diagnoser with no hypothesis: cheap)."""
+    path, _ = make_series("none", 3)
+    tr = read_trace(path)
+    rows = [dataclasses.replace(tr.row(i), drive_phase_rad=None) for i in range(tr.n_points)]
+    want = NullCalibration.default("series_nophase")
+    assert Diagnoser(hypotheses=[]).fit(rows).calibration_ == want
+    assert Diagnoser(hypotheses=[]).fit(tr).calibration_ == NullCalibration.default("series")
 
 
 def test_outcome_does_not_depend_on_the_order_of_the_causes(make_series):
