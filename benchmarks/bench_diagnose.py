@@ -677,7 +677,12 @@ def _oracle_job(job: dict) -> dict:
     parameter pinned at the drawn value, everything else refitted (investigation: it reads
     the truth from the record, which the diagnosis under test never sees)."""
     path, case = _series_file(job, Path(job["files"]))
-    exp = Experiment.read(path)
+    if _design(job) == "two":                           # one experiment of both files
+        from afmlearn.diagnose.observation import read_experiment
+        from afmlearn.diagnose.synthetic import series_files
+        exp = read_experiment(series_files(path))       # no labels
+    else:
+        exp = Experiment.read(path)
     t0 = time.perf_counter()
     h = _pinned(job["cause"], *_truth_value(case, job["cause"]))
     try:
@@ -692,17 +697,20 @@ def _oracle_job(job: dict) -> dict:
 
 def oracle_pass(records: list[dict], path: Path) -> dict[tuple, dict]:
     """:func:`_oracle_job` on every one-effect 8-point draw of :data:`ORACLE_CAUSES` in
-    ``records`` (resumable, one JSON line per draw in ``path``)."""
-    jobs = [{k: r[k] for k in ("set_id", "spp", "noise", "cause", "index", "seed", "periods",
-                               "files")} for r in records
-            if r["cause"] in ORACLE_CAUSES and _variant(r) == (8, True, "one")]
+    ``records`` (each design: one amplitude, two, twin; resumable, one JSON line per draw in
+    ``path``)."""
+    jobs = [{**{k: r[k] for k in ("set_id", "spp", "noise", "cause", "index", "seed",
+                                  "periods", "files")}, "design": _design(r)} for r in records
+            if r["cause"] in ORACLE_CAUSES and _variant(r)[:2] == (8, True)]
     jobs = list({_draw_key(j): j for j in jobs}.values())
     recs = run_jobs(jobs, path, 1, job=_oracle_job, key=_draw_key, desc="oracle")
     return {_draw_key(r): r for r in recs}
 
 
 def _draw_key(r: dict) -> tuple:
-    return (r["set_id"], r["spp"], r["noise"], r["cause"], r["index"], r["seed"], r["periods"])
+    """One simulated draw (the one-amplitude key of old records; other designs appended)."""
+    key = (r["set_id"], r["spp"], r["noise"], r["cause"], r["index"], r["seed"], r["periods"])
+    return key if _design(r) == "one" else (*key, _design(r))
 
 
 def visibility_pass(records: list[dict], path: Path, n_harmonics: int = 30) -> dict[tuple, dict]:
@@ -718,7 +726,7 @@ def visibility_pass(records: list[dict], path: Path, n_harmonics: int = 30) -> d
                 out[tuple(r["key"])] = r["visibility"]
     todo = {}
     for r in records:
-        if r["cause"] != "none" and _design(r) == "one" and _draw_key(r) not in out:
+        if r["cause"] != "none" and r.get("case") and _draw_key(r) not in out:
             todo[_draw_key(r)] = r
     with open(path, "a") as f:
         for k, r in tqdm(todo.items(), desc="visibility", disable=None):

@@ -12,7 +12,13 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_diagnose import _parse_variant, calibrate, series_title, upper_bound  # noqa: E402
+from bench_diagnose import (  # noqa: E402
+    _draw_key,
+    _parse_variant,
+    calibrate,
+    series_title,
+    upper_bound,
+)
 
 
 def _null(drops: dict[str, float]) -> dict:
@@ -59,3 +65,13 @@ def test_two_amplitude_runs_have_their_own_title():
     assert "two-free-amplitude" in series_title(two)
     assert "two-free-amplitude" not in series_title([*two, _parse_variant("8:phase")])
     assert "two-free-amplitude" not in series_title([_parse_variant("8:phase")])
+
+
+def test_draw_keys_keep_old_records_and_separate_the_designs():
+    job = {"set_id": 3, "spp": 200, "noise": 0.01, "cause": "electrostatic", "index": 4,
+           "seed": 2027, "periods": 30.0}
+    old = _draw_key(job)                                   # a record before designs existed
+    assert old == (3, 200, 0.01, "electrostatic", 4, 2027, 30.0)
+    assert _draw_key({**job, "design": "one"}) == old
+    keys = {_draw_key({**job, "design": d}) for d in ("one", "two", "twin")}
+    assert len(keys) == 3
