@@ -459,12 +459,15 @@ class OutputErrorFit:
         RK4 steps per output sample.
     max_nfev : int
         Evaluation budget of the trust-region least squares.
+    diff_step : float
+        Relative finite-difference step of the Jacobian (on ``u`` scaled to order one).
     """
 
     n_harmonics: int = 30
     n_out: int = 128
     substeps: int = 1
     max_nfev: int = 40
+    diff_step: float = 1e-4
 
     def __post_init__(self) -> None:
         if not (isinstance(self.n_harmonics, int) and self.n_harmonics >= 1):
@@ -507,7 +510,7 @@ class OutputErrorFit:
                                       chi2=math.inf, dof=1, converged=False, covariance=cov),
                     obj.states.copy())
         fit = least_squares(lambda v: obj(v * scale), x0 / scale,
-                            bounds=(lo_f / scale, hi_f / scale), diff_step=1e-6,
+                            bounds=(lo_f / scale, hi_f / scale), diff_step=self.diff_step,
                             method="trf", max_nfev=max_nfev or self.max_nfev, xtol=1e-8,
                             ftol=1e-6)
         x = fit.x * scale if float(fit.cost) <= 0.5 * float(r0 @ r0) else x0
@@ -557,6 +560,16 @@ class OutputErrorProfile:
     to the noise widens the interval). ``bounded`` is False when the interval reaches
     ``low`` or ``high``. A lower minimum found along the way moves the estimate there (the
     start was a local minimum).
+
+    A profile point is only an upper bound of the profile (its fit may end in another basin
+    of ``a0``; measured on the two-amplitude benchmark series: points 4-2,700 chi2 above both
+    neighbours, walks stopped at them). So a point where the walk would stop is retried from
+    its neighbour with fresh orbit states (:meth:`_retry`); after the walk, every point above
+    the chord of its neighbours by ``polish_tol`` is re-solved from the lower neighbour
+    (:meth:`_polish`); with ``refine``, points half a step either side of the lowest one are
+    added and the estimate is the vertex of the parabola through the lowest point and its two
+    neighbours (re-fitted there; the free-exponent fit from it is kept only when it is lower
+    and stays between the neighbours), not wherever a free fit stopped in a flat valley.
     """
 
     low: float = 0.5
@@ -565,6 +578,8 @@ class OutputErrorProfile:
     max_points: int = 20
     max_nfev: int = 30
     restart_nfev: int = 8
+    polish_tol: float = 0.5
+    refine: bool = True
 
     def _walk(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
               start: OutputErrorResult, restarts: Restarts | None = None
@@ -610,11 +625,71 @@ class OutputErrorProfile:
                         if ra.converged and ra.chi2 < r.chi2:
                             r, states = ra, sa
                 n += 1
+                if r.chi2 - min(v.chi2 for v in pts.values()) > level + 2.0:
+                    # about to stop: make sure it is the profile, not a lost basin
+                    r = self._retry(fit, problem, meas, prev, float(p), r)
                 pts[float(p)] = r
                 if math.isfinite(r.chi2):
                     prev = r
                 if r.chi2 - min(v.chi2 for v in pts.values()) > level + 2.0:
                     break
+        return self._polish(fit, problem, meas, pts, level)
+
+    def _from(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
+              src: OutputErrorResult, p: float, *, rescale: bool = True
+              ) -> OutputErrorResult:
+        """The fit at fixed exponent ``p`` started from ``src`` (fresh orbit states), the
+        contact coefficient rescaled to keep the force at the deepest indentation."""
+        ei = src.law.exponent_index
+        assert ei is not None
+        u0 = src.u.copy()
+        if rescale:
+            depth = max(float(src.u[3]) - problem.z_min(), 1e-6)
+            u0[src.law.n_head + ei] *= depth ** (float(src.u[4]) - p)
+        u0[4] = p
+        r, _ = fit.solve(problem, meas, src.law, u0, fixed={4: float(p)},
+                         max_nfev=self.max_nfev)
+        return r
+
+    def _retry(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
+               prev: OutputErrorResult, p: float, r: OutputErrorResult) -> OutputErrorResult:
+        """The better of ``r`` and fits at ``p`` from ``prev`` with fresh orbit states (the
+        contact coefficient rescaled or not): a warm-started orbit can jump to the other
+        branch of the tapping orbit."""
+        for rescale in (True, False):
+            ra = self._from(fit, problem, meas, prev, p, rescale=rescale)
+            if ra.converged and ra.chi2 < r.chi2:
+                r = ra
+        return r
+
+    def _polish(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
+                pts: dict[float, OutputErrorResult], level: float
+                ) -> dict[float, OutputErrorResult]:
+        """Re-solve every point above the chord of its two neighbours by ``polish_tol``
+        (within ``4 level`` of the minimum) from its lower neighbour; two passes each way."""
+        pts = dict(pts)
+        for _ in range(2):
+            changed = False
+            for ks in (sorted(pts), sorted(pts)[::-1]):
+                for i in range(1, len(ks) - 1):
+                    a, k, b = pts[ks[i - 1]], pts[ks[i]], pts[ks[i + 1]]
+                    c_min = min(v.chi2 for v in pts.values())
+                    if not math.isfinite(c_min) or (math.isfinite(k.chi2)
+                                                    and k.chi2 - c_min > 4 * level + 2.0):
+                        continue
+                    w = (ks[i + 1] - ks[i]) / (ks[i + 1] - ks[i - 1])
+                    chord = w * a.chi2 + (1 - w) * b.chi2
+                    if not (k.chi2 > chord + self.polish_tol):
+                        continue
+                    src = a if a.chi2 <= b.chi2 else b
+                    if not math.isfinite(src.chi2):
+                        continue
+                    r = self._from(fit, problem, meas, src, float(ks[i]))
+                    if r.converged and r.chi2 < k.chi2:
+                        pts[ks[i]] = r
+                        changed = True
+            if not changed:
+                break
         return pts
 
     def run(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
@@ -641,15 +716,18 @@ class OutputErrorProfile:
                 if math.isfinite(sc) and (p not in env or sc < env[p][0]):
                     env[p] = (sc, r)
         best = min(starts, key=_bic)
-        k_min = min(env, key=lambda k: env[k][0])
-        if env[k_min][0] < _bic(best) - 1e-6 * max(best.chi2, 1.0):
-            # a better basin along a profile: free the exponent again from there
-            cand = env[k_min][1]
-            better, _ = fit.solve(problem, meas, cand.law, cand.u)
-            best = better if better.converged and _bic(better) < env[k_min][0] else cand
-            p_b = round(float(best.u[4]), 6)
-            if p_b not in env or _bic(best) < env[p_b][0]:
-                env[p_b] = (_bic(best), best)
+        if self.refine:
+            best = self._vertex(fit, problem, meas, env, best)
+        else:
+            k_min = min(env, key=lambda k: env[k][0])
+            if env[k_min][0] < _bic(best) - 1e-6 * max(best.chi2, 1.0):
+                # a better basin along a profile: free the exponent again from there
+                cand = env[k_min][1]
+                better, _ = fit.solve(problem, meas, cand.law, cand.u)
+                best = better if better.converged and _bic(better) < env[k_min][0] else cand
+                p_b = round(float(best.u[4]), 6)
+                if p_b not in env or _bic(best) < env[p_b][0]:
+                    env[p_b] = (_bic(best), best)
         ks = sorted(env)
         prof = np.array([(k, env[k][0]) for k in ks])
         level = 3.841 * best.dispersion
@@ -665,6 +743,66 @@ class OutputErrorProfile:
                  "best_exponent": float(best.u[4]), "level": level,
                  "dispersion": best.dispersion, "objective": "output_error",
                  "n_rows": n_eq, "laws": [r.law.library.names for r in starts]}, best)
+
+    def _vertex(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
+                env: dict[float, tuple[float, OutputErrorResult]], best: OutputErrorResult
+                ) -> OutputErrorResult:
+        """The estimate at the profile's minimum (``env``: exponent -> (BIC, fit), updated).
+
+        Points half a step either side of the lowest one (fixed-exponent fits from it), then
+        the vertex of the parabola through the lowest point and its neighbours, fitted at that
+        exponent; a free-exponent fit from there replaces it only when lower and between the
+        neighbours. Returns the fit with the lowest BIC found."""
+
+        def add(r: OutputErrorResult) -> None:
+            if r.converged and math.isfinite(r.chi2):
+                p = round(float(r.u[4]), 6)
+                if p not in env or _bic(r) < env[p][0]:
+                    env[p] = (_bic(r), r)
+
+        add(best)
+        for _ in range(2):  # the lowest point may move to a new half-step point once
+            k_min = min(env, key=lambda k: env[k][0])
+            cand = env[k_min][1]
+            for p in (round(k_min - self.step / 2, 6), round(k_min + self.step / 2, 6)):
+                if (self.low - 1e-9 <= p <= self.high + 1e-9
+                        and min(abs(k - p) for k in env) > self.step / 8):
+                    add(self._from(fit, problem, meas, cand, float(p)))
+            if min(env, key=lambda k: env[k][0]) == k_min:
+                break
+        ks = sorted(env)
+        k_min = min(env, key=lambda k: env[k][0])
+        i = ks.index(k_min)
+        cand = env[k_min][1]
+        if 0 < i < len(ks) - 1:
+            trio = ks[i - 1:i + 2]
+            pv = _vertex_of(np.array(trio), np.array([env[k][0] for k in trio]))
+            if pv is not None and min(abs(k - pv) for k in trio) > 1e-3:
+                near = min(trio, key=lambda k: (abs(k - pv), env[k][0]))
+                k_v = round(pv, 6)
+                add(self._from(fit, problem, meas, env[near][1], k_v))
+                if k_v in env and env[k_v][0] < env[k_min][0] + self.polish_tol:
+                    cand = env[k_v][1]
+            free, _ = fit.solve(problem, meas, cand.law, cand.u)
+            if (free.converged and _bic(free) < min(v[0] for v in env.values())
+                    and trio[0] < float(free.u[4]) < trio[2]):
+                add(free)
+                cand = free
+        return cand
+
+
+def _vertex_of(ps: FloatArray, cs: FloatArray) -> float | None:
+    """Abscissa of the minimum of the parabola through three points (None when it is not
+    convex); clipped to the outer two abscissae."""
+    (p0, p1, p2), (c0, c1, c2) = ps, cs
+    den = (p0 - p1) * (p0 - p2) * (p1 - p2)
+    if den == 0.0:
+        return None
+    a = (p2 * (c1 - c0) + p1 * (c0 - c2) + p0 * (c2 - c1)) / den
+    b = (p2 * p2 * (c0 - c1) + p1 * p1 * (c2 - c0) + p0 * p0 * (c1 - c2)) / den
+    if not (a > 0.0 and math.isfinite(b)):
+        return None
+    return float(min(max(-b / (2.0 * a), p0), p2))
 
 
 def _crossings(prof: FloatArray, level: float) -> tuple[float, float, bool]:
