@@ -345,6 +345,9 @@ class Diagnoser:
     baseline_nrmse_, extended_nrmse_ : float
         Median held-out NRMSE over the held-out observations (robust to one set-point
         predicted on another branch).
+    baseline_chi2_ : float
+        Output-error chi-square of the baseline every first-step drop is measured against
+        (after any re-basing, :meth:`_own_basin`).
     exponent_, exponent_interval_, exponent_bounded_ : float, (float, float), bool or None
         Contact exponent of the contact_geometry extension, its 95 % profile-likelihood
         interval and whether the data bound it (None when it was not tested).
@@ -955,6 +958,7 @@ class Diagnoser:
         self.heldout_start_ = (self._span(obs[0], True)[1] if self.design_ == "tail" else 0)
         self.baseline_ = r.baseline
         self.extended_ = r.extended
+        self.baseline_chi2_ = float(base.sol.chi2)
         self.baseline_nrmse_ = _typical(base.nrmse)
         self.extended_nrmse_ = _typical(final.nrmse)
         self.gain_ = (1.0 - self.extended_nrmse_ / self.baseline_nrmse_
