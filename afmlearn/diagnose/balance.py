@@ -35,10 +35,10 @@ from scipy.optimize import lsq_linear
 
 from afmlearn.preprocess import HarmonicFit
 
-from .spec import ModelSpec, neck_state
+from .spec import ModelSpec
 
 __all__ = ["PeriodicOrbit", "HarmonicBalance", "Solution", "bounded_lstsq", "N_LEVER",
-           "harmonics", "to_real", "from_real", "synthesize", "invert_detector"]
+           "harmonics", "to_real", "from_real", "synthesize"]
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -80,20 +80,6 @@ def from_real(r: FloatArray) -> ComplexArray:
     out[..., 0] = r[..., 0]
     out[..., 1:] = r[..., 1 : n + 1] - 1j * r[..., n + 1 :]
     return out
-
-
-def invert_detector(y: FloatArray, b2: float, b3: float) -> FloatArray:
-    """True deflection ``x`` with ``y = x + b2 x^2 + b3 x^3`` (Newton from ``x = y``)."""
-    x = np.array(y, float)
-    for _ in range(30):
-        g = x + b2 * x**2 + b3 * x**3 - y
-        d = 1.0 + 2.0 * b2 * x + 3.0 * b3 * x**2
-        d = np.where(np.abs(d) < 0.2, np.sign(d) * 0.2 + (d == 0) * 0.2, d)
-        step = g / d
-        x -= step
-        if np.max(np.abs(step)) < 1e-13:
-            break
-    return x
 
 
 @final
@@ -143,9 +129,9 @@ class PeriodicOrbit:
 
     def true_orbit(self, spec: ModelSpec) -> tuple[FloatArray, FloatArray, ComplexArray]:
         """Deflection, rate on the grid and harmonics of the true tip motion under ``spec``."""
-        if spec.detector is None:
+        if spec.output_map is None:
             return self.y, self.ydot, self.Y
-        x = invert_detector(self.y, *spec.detector)
+        x = spec.output_map.invert(self.y)
         X = harmonics(x, self.n_h)
         return synthesize(X, self.grid), synthesize(X, self.grid, 1, self.omega), X
 
@@ -283,7 +269,7 @@ class HarmonicBalance:
         x, v, _ = o.true_orbit(spec)
         z, zd = o.gap - x, -v
         c = sol.coef[N_LEVER:N_LEVER + spec.n_force]     # (a joint fit's other drives follow)
-        att = neck_state(z, spec.a0, spec.neck_length)
+        att = spec.state(z)
         h = 1e-6 * max(float(np.ptp(z)), 1e-9)
         fz = (spec.columns(z + h, zd, att) - spec.columns(z - h, zd, att)) @ c / (2 * h)
         hv = 1e-6 * max(float(np.ptp(zd)), 1e-9)
@@ -325,14 +311,12 @@ class HarmonicBalance:
         n = self._n
         x, v, X = o.true_orbit(spec)
         z, zd = o.gap - x, -v
-        att = neck_state(z, spec.a0, spec.neck_length)
-        cols = spec.columns(z, zd, att)                       # (M, m)
+        cols = spec.columns(z, zd, spec.state(z))             # (M, m)
         F = harmonics(cols.T, o.n_h)                          # (m, n_h + 1)
         G = np.ones(n.size, complex)
-        if spec.mode2 is not None:
-            ratio, q2, g2 = spec.mode2
-            h2 = 1.0 / (ratio**2 - (n * o.omega) ** 2 + 1j * n * o.omega * ratio / q2)
-            G = 1.0 + g2 * self._lever0 * h2
+        mode = spec.extra_mode
+        if mode is not None:
+            G = 1.0 + mode.mode_parameters()[2] * self._lever0 * mode.response(n, o.omega)
         XG = X / G
         drive = np.zeros(n.size, complex)                     # the phase goes in by design()
         A = np.vstack([XG, 1j * n * o.omega * XG, drive, F])  # (N_LEVER + m, n_h + 1)

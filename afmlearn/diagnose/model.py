@@ -13,7 +13,7 @@ from simulator import Scales
 
 from ._kernel import simulate_model
 from .balance import N_LEVER, PeriodicOrbit, harmonics, synthesize
-from .spec import ModelSpec, neck_state
+from .spec import ModelSpec
 
 __all__ = ["DiagnosisModel"]
 
@@ -57,7 +57,7 @@ class DiagnosisModel:
     def orbit_force(self, x: FloatArray, v: FloatArray) -> FloatArray:
         """``F_ts`` along one period of a periodic true-deflection orbit (grid)."""
         z = self.gap - x
-        return self.force(z, -v, neck_state(z, self.spec.a0, self.spec.neck_length))
+        return self.force(z, -v, self.spec.state(z))
 
     def inverted_force(self, orbit: PeriodicOrbit) -> FloatArray:
         """The force the measured orbit implies under this model's lever (grid, one period).
@@ -71,11 +71,11 @@ class DiagnosisModel:
         n = np.arange(X.size)
         K, D, B = (float(v) for v in self.coef[:N_LEVER])
         G = np.ones(n.size, complex)
-        if self.spec.mode2 is not None:
-            ratio, q2, g2 = self.spec.mode2
-            h2 = 1.0 / (ratio**2 - (n * self.omega) ** 2 + 1j * n * self.omega * ratio / q2)
+        mode = self.spec.extra_mode
+        if mode is not None:
+            h2 = mode.response(n, self.omega)
             lever0 = 1.0 - (n * self.omega) ** 2 + 1j * n * self.omega / orbit.quality_factor
-            G = 1.0 + g2 * lever0 * h2
+            G = 1.0 + mode.mode_parameters()[2] * lever0 * h2
         F = -(K - (n * self.omega) ** 2 + 1j * n * self.omega * D) * X / G
         F[1] += B * np.exp(-1j * self.spec.drive_phase)
         # Lanczos sigma factors: the inversion weighs harmonic n by ~n^2, so the truncated
@@ -84,23 +84,21 @@ class DiagnosisModel:
 
     def measured(self, x: FloatArray) -> FloatArray:
         """What the detector reports for true deflection ``x``."""
-        if self.spec.detector is None:
-            return x
-        b2, b3 = self.spec.detector
-        return x + b2 * x**2 + b3 * x**3
+        out = self.spec.output_map
+        return x if out is None else out.measure(x)
 
     def mode2_orbit(self, orbit: PeriodicOrbit) -> tuple[FloatArray, FloatArray]:
         """Second-mode deflection and rate on the orbit grid (zeros for one mode)."""
-        if self.spec.mode2 is None:
+        mode = self.spec.extra_mode
+        if mode is None:
             return np.zeros(orbit.grid), np.zeros(orbit.grid)
         x, v, _ = orbit.true_orbit(self.spec)
         Fn = harmonics(self.orbit_force(x, v), orbit.n_h)
         n = np.arange(orbit.n_h + 1)
-        ratio, q2, g2 = self.spec.mode2
-        h2 = 1.0 / (ratio**2 - (n * self.omega) ** 2 + 1j * n * self.omega * ratio / q2)
+        h2 = mode.response(n, self.omega)
         d = np.zeros(n.size, complex)
         d[1] = self.coef[2] * np.exp(-1j * self.spec.drive_phase)
-        Q2 = g2 * h2 * (d - Fn)
+        Q2 = mode.mode_parameters()[2] * h2 * (d - Fn)
         return synthesize(Q2, orbit.grid), synthesize(Q2, orbit.grid, 1, self.omega)
 
     def kernel_args(self) -> tuple:
@@ -110,12 +108,14 @@ class DiagnosisModel:
         kinds, p1, p2 = s.library().encode()
         n_lib = kinds.size
         c = self.force_coefficients
-        ratio, q2, g2 = s.mode2 if s.mode2 is not None else (0.0, 1.0, 0.0)
+        mode = s.extra_mode
+        k2, d2, g2 = mode.modal() if mode is not None else (0.0, 0.0, 0.0)
         lever = np.array([self.gap, self.coef[0], self.coef[1], self.coef[2], s.drive_phase,
-                          self.omega, ratio**2, ratio / q2, g2, float(s.mode2 is not None)])
-        neck = np.array([c[n_lib]], float) if s.neck_length is not None else np.zeros(1)
+                          self.omega, k2, d2, g2, float(mode is not None)])
+        neck = np.array([c[n_lib]], float) if s.neck is not None else np.zeros(1)
+        dc = s.neck.neck_length() if s.neck is not None else 0.0
         return (lever, kinds, p1, p2, np.ascontiguousarray(c[:n_lib]), float(s.a0), neck,
-                float(s.neck_length or 0.0))
+                float(dc))
 
     def simulate(self, state0: FloatArray, *, attached0: bool, tau0: float, dtau: float,
                  n_samples: int, substeps: int, settle_periods: int = 0
@@ -152,16 +152,17 @@ class DiagnosisModel:
         eq = (f"x'' + {D:.{p}g} x' + {K:.{p}g} x = -F_ts + {B:.{p}g} cos({self.omega:.{p}g} tau"
               f" {'-' if ph >= 0 else '+'} {abs(ph):.{p}g});  F_ts = {terms.lstrip('+ ')};  z = "
               f"{self.gap:.{p}g} - x, a0 = {s.a0:.{p}g}")
-        if s.neck_length is not None:
-            eq += f", neck breaks at z = a0 + {s.neck_length:.{p}g}"
-        if s.mode2 is not None:
-            ratio, q2, g2 = s.mode2
+        # one clause per role of the kernel (spec module docstring)
+        if s.neck is not None:
+            eq += f", neck breaks at z = a0 + {s.neck.neck_length():.{p}g}"
+        if s.extra_mode is not None:
+            ratio, q2, g2 = s.extra_mode.mode_parameters()
             eq += (f";  mode 2: q2'' + {ratio / q2:.{p}g} q2' + {ratio**2:.{p}g} q2 = "
                    f"{g2:.{p}g} (drive - F_ts), x = q1 + q2 (f2/f0 = {ratio:.{p}g}, "
                    f"Q2 = {q2:.{p}g})")
-        if s.detector is not None:
-            b2, b3 = s.detector
-            eq += f";  measured y = x {b2:+.{p}g} x^2 {b3:+.{p}g} x^3"
+        if s.output_map is not None:
+            eq += ";  measured y = x" + "".join(
+                f" {b:+.{p}g} x^{k}" for k, b in enumerate(s.output_map.polynomial(), start=2))
         return eq
 
     def parameters(self) -> dict[str, Any]:
@@ -177,19 +178,6 @@ class DiagnosisModel:
             "coefficients": {n: float(c) for n, c in zip(s.term_names(),
                                                         self.force_coefficients, strict=True)},
         }
-        if s.visco_exponent is not None:
-            out["visco_exponent"] = s.visco_exponent
-        if s.damping_decay is not None:
-            out["damping_decay_m"] = s.damping_decay * L
-        if s.electrostatic_radius is not None:
-            out["electrostatic_radius_m"] = s.electrostatic_radius * L
-        if s.neck_length is not None:
-            out["neck_length_m"] = s.neck_length * L
-        if s.mode2 is not None:
-            out["mode2"] = {"frequency_ratio": s.mode2[0], "frequency_hz":
-                            s.mode2[0] * sc.resonance_frequency, "quality_factor": s.mode2[1],
-                            "force_gain": s.mode2[2]}
-        if s.detector is not None:
-            out["detector"] = {"b2_per_m": s.detector[0] / L, "b3_per_m2": s.detector[1] / L**2,
-                               "b2": s.detector[0], "b3": s.detector[1]}
+        for e in s.extensions:
+            out.update(e.report(sc))
         return out

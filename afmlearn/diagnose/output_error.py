@@ -34,7 +34,7 @@ from .balance import Solution, harmonics, to_real
 from .hypotheses.base import Parameter
 from .joint import JointBalance
 from .model import DiagnosisModel
-from .spec import ModelSpec, neck_state
+from .spec import ModelSpec
 
 __all__ = ["periodic_orbit", "OutputError", "align_phase", "settle_periods", "start_state"]
 
@@ -62,7 +62,7 @@ def periodic_orbit(model: DiagnosisModel, state0: FloatArray, attached0: bool, *
     """
     T = 2 * math.pi / model.omega
     args = model.kernel_args()
-    dim = 4 if model.spec.mode2 is not None else 2
+    dim = 4 if model.spec.extra_mode is not None else 2
     att = bool(attached0)
 
     last: dict[str, FloatArray] = {}
@@ -148,9 +148,8 @@ def _monodromy(period_map, x: FloatArray, px: FloatArray, scale: float) -> Float
 def settle_periods(model: DiagnosisModel, *, cap: int = 3000) -> int:
     """Drive periods for the slowest mode's transient to fall by e^-9 (~1e-4)."""
     d = [float(model.coef[1])]
-    if model.spec.mode2 is not None:
-        ratio, q2, _ = model.spec.mode2
-        d.append(ratio / q2)
+    if model.spec.extra_mode is not None:
+        d.append(model.spec.extra_mode.modal()[1])
     rate = max(min(d), 1e-6) / 2.0          # amplitude decay rate per unit tau
     return int(min(math.ceil(9.0 / rate * model.omega / (2 * math.pi)), cap))
 
@@ -164,7 +163,7 @@ def start_state(model: DiagnosisModel, orbit, phase: float) -> tuple[FloatArray,
     x, v, _ = orbit.true_orbit(model.spec)
     q2, q2d = at.mode2_orbit(orbit)
     k = int(round(float(np.mod(phase, 2 * np.pi)) / (2 * np.pi) * orbit.grid)) % orbit.grid
-    att = neck_state(model.gap - x, model.spec.a0, model.spec.neck_length)
+    att = model.spec.state(model.gap - x)
     return np.array([x[k] - q2[k], v[k] - q2d[k], q2[k], q2d[k]]), bool(att[k])
 
 
@@ -220,7 +219,7 @@ class OutputError:
 
     @staticmethod
     def _key(spec: ModelSpec) -> tuple:
-        return (spec.mode2 is not None, spec.neck_length is not None, spec.detector is not None)
+        return spec.state_key
 
     def model(self, i: int, spec: ModelSpec, coef: FloatArray, phase: float = 0.0
               ) -> DiagnosisModel:
@@ -245,7 +244,7 @@ class OutputError:
               ) -> tuple[FloatArray, FloatArray, bool]:
         """Periodic orbit (true deflection, rate; ``n_out`` phases) of the phase-0 model."""
         s0, a0 = self.start(i, model0)
-        dim = 4 if model0.spec.mode2 is not None else 2
+        dim = 4 if model0.spec.extra_mode is not None else 2
         jac = self._jac.setdefault((i, self._key(model0.spec)), np.full((dim, dim), np.nan))
         state: list = []
         x, v, ok = periodic_orbit(model0, s0, a0, n_out=n_out or self.n_out, max_iter=20,

@@ -1,55 +1,155 @@
-"""`ModelSpec`: the structure of a candidate model (baseline plus at most a few extensions).
+"""`ModelSpec`: the structure of a candidate model -- the baseline plus a tuple of extensions.
 
 Everything is dimensionless (lengths / ``L_ref``, time ``tau = omega0 t``, forces / ``k L_ref``).
-The force is ``F_ts = sum_j c_j theta_j`` (``> 0`` repulsive) with the terms
+The baseline is one lever mode (``K``, ``D``, drive ``B cos(Omega tau - phi)``) and the force
+``F_ts = c_vdw z^-2 + c_contact delta^p`` (``z^-2`` held at ``a0`` in contact, ``delta = a0 -
+z`` in contact, ``p = contact_exponent``; ``F_ts > 0`` repulsive). A cause of design.md
+section 3 extends it by one *extension* object, a frozen final dataclass declared next to its
+hypothesis (:mod:`afmlearn.diagnose.hypotheses`). An extension plays one of the four roles the
+one compiled kernel (:func:`simulator.integrate._kernel.integrate_one` on a
+:class:`simulator.forces.ForceLaw`) can integrate, each a base class here with one abstract
+hook:
 
-====================  =====================================================  ==============
-column                value                                                   sign of c_j
-====================  =====================================================  ==============
-``z^-2``              ``z^-2`` (held at ``a0`` in contact)                    <= 0 (attraction)
-``delta^p``           ``(a0 - z)^p`` in contact (``p = contact_exponent``)    >= 0
-``delta^q delta'``    visco-elastic ``(a0 - z)^q (-z')`` in contact           >= 0
-``exp(-z/z_b) z'``    distance-decaying damping                               <= 0
-``1/(z(z+R))``        sphere electrostatics (held at ``a0`` in contact)       <= 0
-``neck``              ``(z - a0)/d_c`` while the neck holds (``a0 < z <= a0   <= 0
-                      + d_c`` after contact, until it breaks): the extra pull
-                      of a JKR neck over the van der Waals tail, zero where
-                      contact forms and largest at the snap
-====================  =====================================================  ==============
+- :class:`AbstractForceTerm`, hook ``term()``: one more history-free force column, a library
+  term (its values, sign constraint, name and kernel encoding);
+- :class:`AbstractNeck`, hook ``neck_length()``: the kernel's one history-dependent law --
+  after contact (``z <= a0``) a neck pulls ``n (z - a0)/d_c`` (``n <= 0``) until it breaks at
+  ``z > a0 + d_c``; its state is the attachment along the orbit;
+- :class:`AbstractExtraMode`, hook ``mode_parameters()``: a second lever mode sharing the tip
+  force and drive (``f2/f0``, ``Q2``, gain ``g2``);
+- :class:`AbstractOutputMap`, hook ``polynomial()``: the detector, measured
+  ``y = x + b_2 x^2 + b_3 x^3 + ..`` of the true deflection ``x``.
 
-The lever is one mode (``K``, ``D``) or, with ``mode2 = (ratio, Q2, g2)``, two modes sharing
-the tip force and drive with gains ``1`` and ``g2``; ``detector = (b2, b3)`` maps the true
-deflection to the measured one, ``y = x + b2 x^2 + b3 x^3``.
+Every extension also fills :meth:`AbstractExtension.report` (its parameters, SI where they have
+units) and names its :attr:`~AbstractExtension.key`. The roles are the kernel's capabilities:
+any number of force terms, at most one neck, one extra mode and one output map (a second
+history law or a third mode would need the kernel extended first). Force coefficients are
+ordered baseline terms, force terms (in the order the causes were added), then the neck.
 """
 
 from __future__ import annotations
 
+import abc
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, final
+from typing import Any, ClassVar, TypeVar, final
 
 import numpy as np
 from numpy.typing import NDArray
 
-from afmlearn.identify.library import (
-    AFMLibrary,
-    ExponentialDamping,
-    Indentation,
-    IndentationRate,
-    InversePower,
-    SphereElectrostatic,
-    TermInput,
-)
+from afmlearn.identify.library import AFMLibrary, Indentation, InversePower, TermInput
+from afmlearn.identify.library.base import AbstractTerm
+from simulator import Scales
 
-__all__ = ["ModelSpec", "neck_state"]
+__all__ = ["ModelSpec", "AbstractExtension", "AbstractForceTerm", "AbstractNeck",
+           "AbstractExtraMode", "AbstractOutputMap", "neck_state", "invert_polynomial"]
 
 FloatArray = NDArray[np.float64]
+E = TypeVar("E", bound="AbstractExtension")
+
+
+class AbstractExtension(abc.ABC):
+    """One cause's change of the baseline model (subclass one of the four roles below).
+
+    Concrete extensions are frozen, final dataclasses (hashable: a spec is a cache key)
+    declared in the cause's own ``hypotheses/<cause>.py``.
+    """
+
+    #: stable name of the feature (coefficient layout of nested models, warm starts); unique
+    key: ClassVar[str] = ""
+    #: position of the role in a spec (force terms, neck, extra mode, output map)
+    _rank: ClassVar[int] = 0
+
+    @abc.abstractmethod
+    def report(self, scales: Scales) -> dict[str, Any]:
+        """The extension's parameters for :meth:`DiagnosisModel.parameters` (JSON-able;
+        dimensionless, plus SI where they have units)."""
+
+
+class AbstractForceTerm(AbstractExtension):
+    """A history-free force term ``c theta(z, z')``: its column, sign (the term's physical
+    sign), name and kernel encoding are the library term's."""
+
+    _rank = 0
+
+    @abc.abstractmethod
+    def term(self) -> AbstractTerm:
+        """The term as an :mod:`afmlearn.identify.library` term."""
+
+
+class AbstractNeck(AbstractExtension):
+    """The kernel's history-dependent law (``Kind.NECK``): attached from ``z <= a0`` until
+    ``z > a0 + d_c``; while attached and out of contact it adds the column ``(z - a0)/d_c``
+    with a coefficient ``<= 0`` (a pull, zero where contact forms, largest at the snap)."""
+
+    _rank = 1
+
+    @abc.abstractmethod
+    def neck_length(self) -> float:
+        """``d_c`` / L_ref (> 0): how far past contact the neck holds."""
+
+    @final
+    def state(self, z: FloatArray, a0: float) -> NDArray[np.bool_]:
+        """Attachment along one period of a periodic orbit, shape (n,) (:func:`neck_state`)."""
+        return neck_state(z, a0, self.neck_length())
+
+    @final
+    def column(self, z: FloatArray, attached: NDArray[np.bool_], a0: float) -> FloatArray:
+        """``(z - a0)/d_c`` where attached and ``z > a0``, else 0; shape (n,)."""
+        return np.where(attached & (z > a0), (z - a0) / self.neck_length(), 0.0)
+
+
+class AbstractExtraMode(AbstractExtension):
+    """A second lever mode ``q2'' + D2 q2' + K2 q2 = g2 (drive - F_ts)``, ``x = q1 + q2``."""
+
+    _rank = 2
+
+    @abc.abstractmethod
+    def mode_parameters(self) -> tuple[float, float, float]:
+        """``(omega2/omega1, Q2, g2)``."""
+
+    @final
+    def modal(self) -> tuple[float, float, float]:
+        """``(K2, D2, g2) = (ratio^2, ratio/Q2, g2)`` of the equation of motion."""
+        ratio, q2, g2 = self.mode_parameters()
+        return ratio**2, ratio / q2, g2
+
+    @final
+    def response(self, n: NDArray[np.int_], omega: float) -> NDArray[np.complex128]:
+        """``H2_n = 1 / (K2 - (n Omega)^2 + i n Omega D2)``, shape of ``n``."""
+        ratio, q2, _ = self.mode_parameters()
+        return 1.0 / (ratio**2 - (n * omega) ** 2 + 1j * n * omega * ratio / q2)
+
+
+class AbstractOutputMap(AbstractExtension):
+    """The detector's instantaneous map ``y = x + b_2 x^2 + b_3 x^3 + ..`` of the true
+    deflection (lengths / L_ref)."""
+
+    _rank = 3
+
+    @abc.abstractmethod
+    def polynomial(self) -> tuple[float, ...]:
+        """``(b_2, b_3, ..)`` [1/L_ref, 1/L_ref^2, ..]."""
+
+    @final
+    def measure(self, x: FloatArray) -> FloatArray:
+        """Measured ``y`` of true deflection ``x`` (same shape)."""
+        y = x
+        for k, b in enumerate(self.polynomial(), start=2):
+            y = y + b * x**k
+        return y
+
+    @final
+    def invert(self, y: FloatArray) -> FloatArray:
+        """True deflection of measured ``y`` (:func:`invert_polynomial`)."""
+        return invert_polynomial(y, self.polynomial())
 
 
 @final
 @dataclass(frozen=True)
 class ModelSpec:
-    """Structure of a candidate model (see the module docstring); ``None`` = feature off.
+    """Structure of a candidate model (see the module docstring).
 
     Parameters
     ----------
@@ -59,69 +159,96 @@ class ModelSpec:
         ``phi`` of the drive ``B cos(Omega tau - phi)`` [rad], ``tau`` from the first sample.
     contact_exponent : float
         ``p`` of ``delta^p`` (1.5: sphere).
-    visco_exponent : float or None
-        ``q`` of the visco-elastic term ``delta^q delta'``.
-    damping_decay : float or None
-        ``z_b`` / ``L_ref`` of ``exp(-z/z_b) z'``.
-    electrostatic_radius : float or None
-        ``R`` / ``L_ref`` of ``1/(z(z+R))``.
-    neck_length : float or None
-        ``d_c`` / ``L_ref``: the neck breaks at ``z = a0 + d_c`` on retraction.
-    mode2 : (float, float, float) or None
-        ``(omega2/omega1, Q2, g2)`` of a second mode.
-    detector : (float, float) or None
-        ``(b2, b3)`` of the measured output ``y = x + b2 x^2 + b3 x^3`` [1/L_ref, 1/L_ref^2].
+    extensions : tuple of AbstractExtension
+        The causes' extensions (distinct keys; at most one neck, extra mode and output map).
+        Stored ordered by role (force terms, neck, extra mode, output map), force terms in
+        the order given.
     """
 
     a0: float
     drive_phase: float = 0.0
     contact_exponent: float = 1.5
-    visco_exponent: float | None = None
-    damping_decay: float | None = None
-    electrostatic_radius: float | None = None
-    neck_length: float | None = None
-    mode2: tuple[float, float, float] | None = None
-    detector: tuple[float, float] | None = None
+    extensions: tuple[AbstractExtension, ...] = ()
+
+    def __post_init__(self) -> None:
+        exts = tuple(self.extensions)
+        bad = [e for e in exts if not (isinstance(e, AbstractExtension) and e.key)]
+        if bad:
+            raise ValueError(f"extensions must be AbstractExtension objects with a key, got "
+                             f"{bad!r}")
+        keys = [e.key for e in exts]
+        if len(set(keys)) != len(keys):
+            raise ValueError(f"extensions must have distinct keys, got {keys}")
+        for role in (AbstractNeck, AbstractExtraMode, AbstractOutputMap):
+            if sum(isinstance(e, role) for e in exts) > 1:
+                raise ValueError(f"extensions: at most one {role.__name__} (the kernel "
+                                 f"integrates one), got {keys}")
+        object.__setattr__(self, "extensions", tuple(sorted(exts, key=lambda e: e._rank)))
 
     def replace(self, **changes: Any) -> ModelSpec:
         return dataclasses.replace(self, **changes)
+
+    def with_extension(self, extension: AbstractExtension) -> ModelSpec:
+        """This spec extended by ``extension`` (replacing the one with the same key)."""
+        exts = list(self.extensions)
+        keys = [e.key for e in exts]
+        if extension.key in keys:
+            exts[keys.index(extension.key)] = extension
+        else:
+            exts.append(extension)
+        return self.replace(extensions=tuple(exts))
+
+    def get(self, kind: type[E]) -> E | None:
+        """The extension that is a ``kind`` (a concrete class or a role), or None."""
+        return next((e for e in self.extensions if isinstance(e, kind)), None)
+
+    # ---------------------------------------------------------------- roles
+    @property
+    def force_terms(self) -> tuple[AbstractForceTerm, ...]:
+        return tuple(e for e in self.extensions if isinstance(e, AbstractForceTerm))
+
+    @property
+    def neck(self) -> AbstractNeck | None:
+        return self.get(AbstractNeck)
+
+    @property
+    def extra_mode(self) -> AbstractExtraMode | None:
+        return self.get(AbstractExtraMode)
+
+    @property
+    def output_map(self) -> AbstractOutputMap | None:
+        return self.get(AbstractOutputMap)
+
+    @property
+    def state_key(self) -> tuple[str, ...]:
+        """Keys of the extensions that change the state or the output (neck, extra mode,
+        output map): models with the same state key share shooting warm starts."""
+        return tuple(e.key for e in self.extensions if not isinstance(e, AbstractForceTerm))
 
     # ---------------------------------------------------------------- force terms
     def library(self) -> AFMLibrary:
         """The smooth (history-free) force terms as an :class:`AFMLibrary`."""
         terms: list[Any] = [InversePower(n=2), Indentation(p=float(self.contact_exponent))]
-        if self.visco_exponent is not None:
-            terms.append(IndentationRate(p=float(self.visco_exponent), l=1))
-        if self.damping_decay is not None:
-            terms.append(ExponentialDamping(decay_length=float(self.damping_decay)))
-        if self.electrostatic_radius is not None:
-            terms.append(SphereElectrostatic(radius=float(self.electrostatic_radius)))
+        terms += [e.term() for e in self.force_terms]
         return AFMLibrary(terms)
 
     @property
-    def n_neck(self) -> int:
-        return 0 if self.neck_length is None else 1
-
-    @property
     def n_force(self) -> int:
-        """Number of force coefficients (library terms, then neck columns)."""
-        return self.library().n_terms + self.n_neck
+        """Number of force coefficients (library terms, then the neck's column)."""
+        return self.library().n_terms + (self.neck is not None)
 
     def term_names(self) -> list[str]:
         names = list(self.library().names)
-        if self.neck_length is not None:
-            names += ["neck"]
+        if self.neck is not None:
+            names += [self.neck.key]
         return names
 
     def term_keys(self) -> list[str]:
         """A stable key per force coefficient (which feature it belongs to), so that the
         coefficients of a nested model can be placed into an extension's vector."""
-        keys = ["vdw", "contact"]
-        for key, on in (("visco", self.visco_exponent), ("damping", self.damping_decay),
-                        ("electrostatic", self.electrostatic_radius),
-                        ("neck", self.neck_length)):
-            if on is not None:
-                keys.append(key)
+        keys = ["vdw", "contact", *(e.key for e in self.force_terms)]
+        if self.neck is not None:
+            keys.append(self.neck.key)
         return keys
 
     def embed(self, spec: ModelSpec, coef: FloatArray) -> FloatArray:
@@ -141,23 +268,29 @@ class ModelSpec:
     def signs(self) -> list[int]:
         """Sign constraint of each force coefficient (+1 >= 0, -1 <= 0, 0 free)."""
         out = [int(t.sign) for t in self.library().terms]
-        if self.neck_length is not None:
+        if self.neck is not None:
             out += [-1]
         return out
+
+    def state(self, z: FloatArray) -> NDArray[np.bool_]:
+        """The neck's attachment along one period of a periodic orbit of gap ``z`` (shape
+        (n,); all False without a neck)."""
+        if self.neck is None:
+            return np.zeros(np.shape(z), bool)
+        return self.neck.state(z, self.a0)
 
     def columns(self, z: FloatArray, zdot: FloatArray, attached: NDArray[np.bool_] | None = None
                 ) -> FloatArray:
         """Force columns on a trajectory, shape (n, n_force).
 
-        ``attached`` (shape (n,)) is the neck state; needed when ``neck_length`` is set.
+        ``attached`` (shape (n,)) is the neck state; needed when there is a neck.
         """
         s = TermInput(z=np.asarray(z, float), zdot=np.asarray(zdot, float),
                       x=np.zeros_like(z, dtype=float), a0=float(self.a0))
         cols = [self.library().evaluate(s)]
-        if self.neck_length is not None:
+        if self.neck is not None:
             assert attached is not None
-            neck = attached & (z > self.a0)
-            cols.append(np.where(neck, (z - self.a0) / self.neck_length, 0.0)[:, None])
+            cols.append(self.neck.column(z, attached, self.a0)[:, None])
         return np.column_stack(cols)
 
 
@@ -181,3 +314,22 @@ def neck_state(z: FloatArray, a0: float, neck_length: float | None) -> NDArray[n
             if sweep:
                 out[i] = on
     return out
+
+
+def invert_polynomial(y: FloatArray, coefficients: Sequence[float]) -> FloatArray:
+    """True deflection ``x`` with ``y = x + b_2 x^2 + b_3 x^3 + ..`` (Newton from ``x = y``;
+    ``coefficients = (b_2, b_3, ..)``), shape of ``y``."""
+    x = np.array(y, float)
+    for _ in range(30):
+        g = x
+        d = 1.0
+        for k, b in enumerate(coefficients, start=2):
+            g = g + b * x**k
+            d = d + float(k) * b * x ** (k - 1)
+        g = g - y
+        d = np.where(np.abs(d) < 0.2, np.sign(d) * 0.2 + (d == 0) * 0.2, d)
+        step = g / d
+        x -= step
+        if np.max(np.abs(step)) < 1e-13:
+            break
+    return x

@@ -251,8 +251,8 @@ def plot_spectrum(dg: Any, path: str | os.PathLike[str]) -> Path:
                   label="noise level (5 % false detections over all harmonics)")
         a.plot(n, np.maximum(d["models"][key] * L, 1e-9), "x", color=col, ms=5,
                label="model harmonic")
-        if model.spec.mode2 is not None:
-            r = model.spec.mode2[0] / cal.omega
+        if model.spec.extra_mode is not None:
+            r = model.spec.extra_mode.mode_parameters()[0] / cal.omega
             a.axvline(r, color=col, ls=":", lw=1, label=f"mode 2 ({r:.2f} f_drive)")
         err = (getattr(dg, "spectral_error_", None) or {}).get(
             "baseline" if key == "none" else "extended", math.nan)

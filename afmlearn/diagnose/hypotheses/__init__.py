@@ -1,17 +1,20 @@
-"""Diagnosis hypotheses: one class per cause of design.md section 3."""
+"""Diagnosis hypotheses: one class per cause of design.md section 3, each next to the model
+extension it adds (:mod:`afmlearn.diagnose.spec`; ``contact_geometry`` frees a baseline
+parameter instead)."""
 
-from .adhesion_hysteresis import AdhesionHysteresis
+from .adhesion_hysteresis import AdhesionHysteresis, Neck
 from .base import AbstractHypothesis, Context, Parameter
 from .contact_geometry import ContactGeometry
-from .detector_nonlinearity import DetectorNonlinearity
-from .electrostatic import Electrostatic
-from .higher_mode import HigherMode
-from .long_range_damping import LongRangeDamping
-from .viscoelastic import Viscoelastic
+from .detector_nonlinearity import DetectorMap, DetectorNonlinearity
+from .electrostatic import Electrostatic, ElectrostaticTerm
+from .higher_mode import HigherMode, SecondMode
+from .long_range_damping import DecayingDamping, LongRangeDamping
+from .viscoelastic import Viscoelastic, ViscoelasticTerm
 
 __all__ = ["AbstractHypothesis", "Context", "Parameter", "HigherMode", "Viscoelastic",
            "LongRangeDamping", "ContactGeometry", "AdhesionHysteresis", "Electrostatic",
-           "DetectorNonlinearity", "default_hypotheses"]
+           "DetectorNonlinearity", "default_hypotheses", "SecondMode", "ViscoelasticTerm",
+           "DecayingDamping", "Neck", "ElectrostaticTerm", "DetectorMap"]
 
 
 def default_hypotheses() -> list[AbstractHypothesis]:

@@ -3,13 +3,31 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import final
+from dataclasses import dataclass
+from typing import Any, final
+
+from simulator import Scales
 
 from ..model import DiagnosisModel
-from ..spec import ModelSpec
+from ..spec import AbstractNeck, ModelSpec
 from .base import AbstractHypothesis, Context, Parameter, energy_text, gain_text, length_parameter
 
-__all__ = ["AdhesionHysteresis"]
+__all__ = ["AdhesionHysteresis", "Neck"]
+
+
+@final
+@dataclass(frozen=True)
+class Neck(AbstractNeck):
+    """A JKR-like neck that breaks ``length`` / L_ref past contact on retraction."""
+
+    length: float
+    key = "neck"
+
+    def neck_length(self) -> float:
+        return float(self.length)
+
+    def report(self, scales: Scales) -> dict[str, Any]:
+        return {"neck_length_m": self.length * scales.length}
 
 
 @final
@@ -33,11 +51,12 @@ class AdhesionHysteresis(AbstractHypothesis):
         return [length_parameter("neck_length", 0.1e-9, 3e-9, ctx, 12)]
 
     def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
-        return spec.replace(neck_length=float(values[0]))
+        return spec.with_extension(Neck(length=float(values[0])))
 
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
                  energy=None) -> str:
-        dc = (model.spec.neck_length or 0.0) * model.scales.length
+        neck = model.spec.get(Neck)
+        dc = (neck.length if neck is not None else 0.0) * model.scales.length
         return (f"loss at pull-off: neck to {dc * 1e9:.2f} nm past contact; chi2 drop "
                 f"{delta_chi2:.1f}, held-out gain {gain_text(gain)}"
                 f"{energy_text(model, energy)}")

@@ -3,9 +3,10 @@
 A hypothesis names a cause of design.md section 3 and says how the baseline
 :class:`~afmlearn.diagnose.spec.ModelSpec` is extended: which nonlinear parameters the
 extension adds (:meth:`parameters`, with a search grid and bounds) and how their values enter
-the spec (:meth:`extend`, the one hook every cause fills in). The diagnosis fits the extension
-(grid, then joint refinement with ``a0`` and the drive phase), measures its gain on held-out
-data and asks :meth:`evidence` for a one-line physical reading of the fit.
+the spec (:meth:`extend`, the one hook every cause fills in: it adds the cause's extension
+object, declared in the same file, with ``spec.with_extension(...)``). The diagnosis fits the
+extension (grid, then joint refinement with ``a0`` and the drive phase), measures its gain on
+held-out data and asks :meth:`evidence` for a one-line physical reading of the fit.
 """
 
 from __future__ import annotations
@@ -124,6 +125,9 @@ class AbstractHypothesis(abc.ABC):
     def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
         """The baseline ``spec`` extended with parameter ``values`` (order of parameters)."""
 
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
     def nested_values(self, params: Sequence[Parameter]) -> list[float]:
         """Parameter values at which the extension is the baseline."""
         return [p.grid[0] if p.nested is None else p.nested for p in params]
@@ -169,6 +173,3 @@ def energy_text(model: DiagnosisModel, energy: NDArray[np.float64] | None) -> st
         return ""
     ev = model.scales.energy / 1.602176634e-19
     return f"; sample takes {energy[1] * ev:.3g} eV/cycle (baseline {energy[0] * ev:.3g})"
-
-    def __repr__(self) -> str:
-        return f"{type(self).__name__}()"

@@ -3,13 +3,34 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import final
+from dataclasses import dataclass
+from typing import Any, final
+
+from simulator import Scales
 
 from ..model import DiagnosisModel
-from ..spec import ModelSpec
+from ..spec import AbstractOutputMap, ModelSpec
 from .base import AbstractHypothesis, Context, Parameter, gain_text
 
-__all__ = ["DetectorNonlinearity"]
+__all__ = ["DetectorNonlinearity", "DetectorMap"]
+
+
+@final
+@dataclass(frozen=True)
+class DetectorMap(AbstractOutputMap):
+    """``y = x + b2 x^2 + b3 x^3`` [b2: 1/L_ref, b3: 1/L_ref^2]."""
+
+    b2: float
+    b3: float
+    key = "detector"
+
+    def polynomial(self) -> tuple[float, float]:
+        return (self.b2, self.b3)
+
+    def report(self, scales: Scales) -> dict[str, Any]:
+        L = scales.length
+        return {"detector": {"b2_per_m": self.b2 / L, "b3_per_m2": self.b3 / L**2,
+                             "b2": self.b2, "b3": self.b3}}
 
 
 @final
@@ -37,10 +58,11 @@ class DetectorNonlinearity(AbstractHypothesis):
                 Parameter("b3", -l3, l3, tuple(g3), nested=0.0)]
 
     def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
-        return spec.replace(detector=(float(values[0]), float(values[1])))
+        return spec.with_extension(DetectorMap(b2=float(values[0]), b3=float(values[1])))
 
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
                  energy=None) -> str:
-        b2, b3 = model.spec.detector or (0.0, 0.0)
+        det = model.spec.get(DetectorMap)
+        b2, b3 = det.polynomial() if det is not None else (0.0, 0.0)
         return (f"output map b2 = {b2:.3g}/L, b3 = {b3:.3g}/L^2 (harmonics not shaped by the "
                 f"lever); chi2 drop {delta_chi2:.1f}, held-out gain {gain_text(gain)}")

@@ -3,13 +3,32 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import final
+from dataclasses import dataclass
+from typing import Any, final
+
+from afmlearn.identify.library import SphereElectrostatic
+from simulator import Scales
 
 from ..model import DiagnosisModel
-from ..spec import ModelSpec
+from ..spec import AbstractForceTerm, ModelSpec
 from .base import AbstractHypothesis, Context, Parameter, gain_text, length_parameter
 
-__all__ = ["Electrostatic"]
+__all__ = ["Electrostatic", "ElectrostaticTerm"]
+
+
+@final
+@dataclass(frozen=True)
+class ElectrostaticTerm(AbstractForceTerm):
+    """``c / (z (z + R))`` at ``max(z, a0)`` (``c <= 0``), ``R = radius`` / L_ref."""
+
+    radius: float
+    key = "electrostatic"
+
+    def term(self) -> SphereElectrostatic:
+        return SphereElectrostatic(radius=float(self.radius))
+
+    def report(self, scales: Scales) -> dict[str, Any]:
+        return {"electrostatic_radius_m": self.radius * scales.length}
 
 
 @final
@@ -31,10 +50,11 @@ class Electrostatic(AbstractHypothesis):
         return [length_parameter("radius", 1e-9, 100e-9, ctx, 7, extra=(ctx.tip_radius,))]
 
     def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
-        return spec.replace(electrostatic_radius=float(values[0]))
+        return spec.with_extension(ElectrostaticTerm(radius=float(values[0])))
 
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
                  energy=None) -> str:
-        r = (model.spec.electrostatic_radius or 0.0) * model.scales.length
+        term = model.spec.get(ElectrostaticTerm)
+        r = (term.radius if term is not None else 0.0) * model.scales.length
         return (f"1/(z(z+R)) attraction with R = {r * 1e9:.1f} nm; chi2 drop {delta_chi2:.1f},"
                 f" held-out gain {gain_text(gain)}")

@@ -23,17 +23,20 @@ outside its range and contributes nothing. The weight ``w = QRNN_WEIGHT`` and it
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, final
 
 import numpy as np
 
+from simulator import Scales
+
 from ..model import DiagnosisModel
-from ..spec import ModelSpec
+from ..spec import AbstractExtraMode, ModelSpec
 from .base import AbstractHypothesis, Context, Parameter, Probe, gain_text
 
-__all__ = ["HigherMode", "qrnn_log_odds", "QRNN_WEIGHT", "QRNN_MAX_FORECAST_NRMSE",
-           "QRNN_MAX_LOG_ODDS"]
+__all__ = ["HigherMode", "SecondMode", "qrnn_log_odds", "QRNN_WEIGHT",
+           "QRNN_MAX_FORECAST_NRMSE", "QRNN_MAX_LOG_ODDS"]
 
 #: weight of the QRNN's log likelihood ratio in the decision: the slope of a logistic fit of
 #: the coupled label on max(0, LLR) over the out-of-distribution set-points (288 steady records
@@ -61,6 +64,27 @@ def qrnn_log_odds(evidence: Any, *, weight: float = QRNN_WEIGHT) -> float:
     if not ok.any():
         return 0.0
     return float(min(float(weight) * max(0.0, float(np.max(llr[ok]))), QRNN_MAX_LOG_ODDS))
+
+
+@final
+@dataclass(frozen=True)
+class SecondMode(AbstractExtraMode):
+    """Mode 2 at ``frequency_ratio`` = f2/f0 with quality factor ``quality_factor`` and
+    tip-force (and drive) gain ``force_gain``."""
+
+    frequency_ratio: float
+    quality_factor: float
+    force_gain: float
+    key = "mode2"
+
+    def mode_parameters(self) -> tuple[float, float, float]:
+        return (self.frequency_ratio, self.quality_factor, self.force_gain)
+
+    def report(self, scales: Scales) -> dict[str, Any]:
+        return {"mode2": {"frequency_ratio": self.frequency_ratio, "frequency_hz":
+                          self.frequency_ratio * scales.resonance_frequency,
+                          "quality_factor": self.quality_factor,
+                          "force_gain": self.force_gain}}
 
 
 @final
@@ -128,7 +152,7 @@ class HigherMode(AbstractHypothesis):
 
     def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
         r, q2, g2 = (float(v) for v in values)
-        return spec.replace(mode2=(r, q2, g2))
+        return spec.with_extension(SecondMode(frequency_ratio=r, quality_factor=q2, force_gain=g2))
 
     def details(self, model: DiagnosisModel, probe: Probe) -> dict[str, Any]:
         """The QRNN's calibrated coupling probability of every record and the log-odds it
@@ -149,7 +173,8 @@ class HigherMode(AbstractHypothesis):
 
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
                  energy=None) -> str:
-        r, q2, g2 = model.spec.mode2 or (np.nan, np.nan, np.nan)
+        mode = model.spec.get(SecondMode)
+        r, q2, g2 = mode.mode_parameters() if mode is not None else (np.nan,) * 3
         n = r / model.omega
         return (f"second mode at f2/f0 = {r:.3f} (Q2 = {q2:.0f}, gain {g2:.2f}) next to "
                 f"harmonic {n:.2f} of the drive; chi2 drop {delta_chi2:.1f}, held-out gain "

@@ -3,13 +3,32 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import final
+from dataclasses import dataclass
+from typing import Any, final
+
+from afmlearn.identify.library import ExponentialDamping
+from simulator import Scales
 
 from ..model import DiagnosisModel
-from ..spec import ModelSpec
+from ..spec import AbstractForceTerm, ModelSpec
 from .base import AbstractHypothesis, Context, Parameter, energy_text, gain_text, length_parameter
 
-__all__ = ["LongRangeDamping"]
+__all__ = ["LongRangeDamping", "DecayingDamping"]
+
+
+@final
+@dataclass(frozen=True)
+class DecayingDamping(AbstractForceTerm):
+    """``c exp(-z/z_b) z'`` (``c <= 0``), ``z_b = decay`` / L_ref."""
+
+    decay: float
+    key = "damping"
+
+    def term(self) -> ExponentialDamping:
+        return ExponentialDamping(decay_length=float(self.decay))
+
+    def report(self, scales: Scales) -> dict[str, Any]:
+        return {"damping_decay_m": self.decay * scales.length}
 
 
 @final
@@ -33,11 +52,12 @@ class LongRangeDamping(AbstractHypothesis):
         return [length_parameter("decay_length", 1e-9, 20e-9, ctx, 8)]
 
     def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
-        return spec.replace(damping_decay=float(values[0]))
+        return spec.with_extension(DecayingDamping(decay=float(values[0])))
 
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
                  energy=None) -> str:
-        zb = (model.spec.damping_decay or 0.0) * model.scales.length
+        term = model.spec.get(DecayingDamping)
+        zb = (term.decay if term is not None else 0.0) * model.scales.length
         return (f"loss out of contact, decay length {zb * 1e9:.2f} nm; chi2 drop "
                 f"{delta_chi2:.1f}, held-out gain {gain_text(gain)}"
                 f"{energy_text(model, energy)}")

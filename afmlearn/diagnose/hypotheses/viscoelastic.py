@@ -3,13 +3,32 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import final
+from dataclasses import dataclass
+from typing import Any, final
+
+from afmlearn.identify.library import IndentationRate
+from simulator import Scales
 
 from ..model import DiagnosisModel
-from ..spec import ModelSpec
+from ..spec import AbstractForceTerm, ModelSpec
 from .base import AbstractHypothesis, Context, Parameter, energy_text, gain_text
 
-__all__ = ["Viscoelastic"]
+__all__ = ["Viscoelastic", "ViscoelasticTerm"]
+
+
+@final
+@dataclass(frozen=True)
+class ViscoelasticTerm(AbstractForceTerm):
+    """``c delta^q delta'`` in contact (``c >= 0``), ``q = exponent``."""
+
+    exponent: float
+    key = "visco"
+
+    def term(self) -> IndentationRate:
+        return IndentationRate(p=float(self.exponent), l=1)
+
+    def report(self, scales: Scales) -> dict[str, Any]:
+        return {"visco_exponent": self.exponent}
 
 
 @final
@@ -34,10 +53,12 @@ class Viscoelastic(AbstractHypothesis):
         return []
 
     def extend(self, spec: ModelSpec, values: Sequence[float]) -> ModelSpec:
-        return spec.replace(visco_exponent=self.exponent)
+        return spec.with_extension(ViscoelasticTerm(exponent=self.exponent))
 
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
                  energy=None) -> str:
-        return (f"loss only while indenting, delta^{model.spec.visco_exponent:.2f} delta' term; "
+        term = model.spec.get(ViscoelasticTerm)
+        q = term.exponent if term is not None else float("nan")
+        return (f"loss only while indenting, delta^{q:.2f} delta' term; "
                 f"chi2 drop {delta_chi2:.1f}, held-out gain {gain_text(gain)}"
                 f"{energy_text(model, energy)}")

@@ -14,13 +14,13 @@ from afmlearn.diagnose.balance import (
     bounded_lstsq,
     from_real,
     harmonics,
-    invert_detector,
     synthesize,
     to_real,
 )
+from afmlearn.diagnose.hypotheses.detector_nonlinearity import DetectorMap
 from afmlearn.diagnose.joint import JointBalance
 from afmlearn.diagnose.output_error import OutputError
-from afmlearn.diagnose.spec import ModelSpec
+from afmlearn.diagnose.spec import ModelSpec, invert_polynomial
 from afmlearn.io import read_trace
 from afmlearn.preprocess import calibrate, fit_harmonics
 
@@ -60,7 +60,11 @@ def test_bounded_lstsq_known_answer_and_non_finite_rows_rejected():
 def test_detector_inverse():
     x = np.linspace(-1.5, 1.5, 101)
     y = x + 0.03 * x**2 - 0.01 * x**3
-    assert np.allclose(invert_detector(y, 0.03, -0.01), x, atol=1e-12)
+    det = DetectorMap(b2=0.03, b3=-0.01)
+    assert np.allclose(det.measure(x), y, rtol=0, atol=1e-15)
+    assert np.allclose(det.invert(y), x, rtol=0, atol=1e-12)
+    assert np.allclose(invert_polynomial(y + 0.002 * x**4, (0.03, -0.01, 0.002)), x, rtol=0,
+                       atol=1e-12)
 
 
 def test_whitened_chi2_is_chi_square_at_the_truth(make_trace):

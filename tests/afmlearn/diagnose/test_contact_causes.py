@@ -19,6 +19,8 @@ import pytest
 
 from afmlearn.diagnose import Diagnoser
 from afmlearn.diagnose.hypotheses import AdhesionHysteresis, ContactGeometry, Electrostatic
+from afmlearn.diagnose.hypotheses.adhesion_hysteresis import Neck
+from afmlearn.diagnose.hypotheses.electrostatic import ElectrostaticTerm
 from afmlearn.diagnose.synthetic import SeriesCase, simulate_series
 from afmlearn.io import Experiment
 
@@ -94,7 +96,7 @@ def test_neck_series_is_named(series):
     dg = _diagnose(series("adhesion_hysteresis"), [AdhesionHysteresis()])
     assert dg.cause_ == "adhesion_hysteresis", dg.candidates_
     assert dg.gain_ > 0.05
-    assert dg.extended_.spec.neck_length is not None
+    assert dg.extended_.spec.get(Neck) is not None
 
 
 def test_electrostatic_series_is_named(series):
@@ -103,7 +105,7 @@ def test_electrostatic_series_is_named(series):
     dg = _diagnose(series("electrostatic"), [Electrostatic()])
     assert dg.cause_ == "electrostatic", dg.candidates_
     assert dg.gain_ > 0.05
-    r_nm = dg.extended_.spec.electrostatic_radius * dg.extended_.scales.length * 1e9
+    r_nm = dg.extended_.spec.get(ElectrostaticTerm).radius * dg.extended_.scales.length * 1e9
     assert 1.0 <= r_nm <= 100.0
 
 

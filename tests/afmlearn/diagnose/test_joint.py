@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from afmlearn.diagnose.balance import HarmonicBalance, to_real
+from afmlearn.diagnose.hypotheses import ElectrostaticTerm, Neck, ViscoelasticTerm
 from afmlearn.diagnose.joint import JointBalance, wrap
 from afmlearn.diagnose.observation import as_traces, build_observations, folds
 from afmlearn.diagnose.output_error import align_phase
@@ -45,12 +46,12 @@ def test_folds_hold_every_observation_out_once():
 
 
 def test_embed_places_nested_coefficients_by_feature():
-    base = ModelSpec(a0=0.03, electrostatic_radius=0.5)
-    ext = base.replace(visco_exponent=0.5, neck_length=0.1)
+    base = ModelSpec(a0=0.03, extensions=(ElectrostaticTerm(radius=0.5),))
+    ext = base.with_extension(ViscoelasticTerm(exponent=0.5)).with_extension(Neck(length=0.1))
     coef = np.array([1.0, 0.003, 0.004, -1e-4, 2.0, -3e-3])       # K D B vdw contact elec
     out = ext.embed(base, coef)
     keys = ext.term_keys()
-    assert keys == ["vdw", "contact", "visco", "electrostatic", "neck"]
+    assert keys == ["vdw", "contact", "electrostatic", "visco", "neck"]
     assert out.size == 3 + len(keys)
     assert out[3 + keys.index("electrostatic")] == -3e-3
     assert out[3 + keys.index("visco")] == 0.0 and out[3 + keys.index("neck")] == 0.0

@@ -8,6 +8,9 @@ import numpy as np
 import pytest
 
 from afmlearn.diagnose._kernel import simulate_model, simulate_reference
+from afmlearn.diagnose.hypotheses.adhesion_hysteresis import Neck
+from afmlearn.diagnose.hypotheses.higher_mode import SecondMode
+from afmlearn.diagnose.hypotheses.viscoelastic import ViscoelasticTerm
 from afmlearn.diagnose.model import DiagnosisModel
 from afmlearn.diagnose.output_error import periodic_orbit
 from afmlearn.diagnose.spec import ModelSpec
@@ -16,31 +19,32 @@ from simulator import Scales
 SCALES = Scales(spring_constant=20.0, resonance_frequency=3e5, length=1e-8)
 
 
-def _model(**spec) -> DiagnosisModel:
-    s = ModelSpec(a0=0.03, drive_phase=0.3, **spec)
+def _model(*extensions) -> DiagnosisModel:
+    s = ModelSpec(a0=0.03, drive_phase=0.3, extensions=extensions)
     n = s.n_force
     coef = np.zeros(3 + n)
     coef[:3] = [1.0, 1 / 300, 0.009]
     coef[3:5] = [-5e-5, 2.3]
-    if s.visco_exponent is not None:
+    if s.get(ViscoelasticTerm) is not None:
         coef[5] = 0.2
-    if s.neck_length is not None:
+    if s.neck is not None:
         coef[-1] = -0.4
     return DiagnosisModel(spec=s, coef=coef, omega=1.0, gap=1.0, scales=SCALES)
 
 
 class _Force:
     def __init__(self, m: DiagnosisModel) -> None:
-        self.m, self.a0, self.dc = m, m.spec.a0, float(m.spec.neck_length or 0.0)
+        self.m, self.a0 = m, m.spec.a0
+        self.dc = m.spec.neck.neck_length() if m.spec.neck is not None else 0.0
 
     def __call__(self, z, zd, att):
         return float(self.m.force(np.array([z]), np.array([zd]), np.array([att]))[0])
 
 
-@pytest.mark.parametrize("spec", [{}, {"visco_exponent": 0.5}, {"neck_length": 0.05},
-                                  {"mode2": (6.1, 900.0, 1.0)}], ids=str)
+@pytest.mark.parametrize("spec", [(), (ViscoelasticTerm(0.5),), (Neck(0.05),),
+                                  (SecondMode(6.1, 900.0, 1.0),)], ids=str)
 def test_kernel_matches_reference(spec):
-    m = _model(**spec)
+    m = _model(*spec)
     args = m.kernel_args()
     s0 = np.array([0.9, 0.4, 0.0, 0.0])
     dt = 2 * math.pi / 200
@@ -71,7 +75,7 @@ def test_conservative_orbit_balances_drive_and_damping():
 def test_neck_loss_is_the_loop_area_and_converges_with_the_step():
     """The neck takes n0 d_c / 2 per cycle (the ramp's triangle); switches are located, so the
     orbit does not depend on the step count (a fixed step would make it first order)."""
-    m = _model(neck_length=0.05)
+    m = _model(Neck(0.05))
     orbits = []
     s0 = _settled(m)
     for n in (256, 1024, 4096):
