@@ -187,7 +187,9 @@ def test_a_start_from_another_set_of_curves_is_the_same_si_law():
     part = GroupFitter(hypothesis=DAMPING, max_nfev=1, max_evaluations=3,
                        rescales=((1.0, 1.0),), start=sub).fit(curves[1:])
     assert part.length_m_ != pytest.approx(full.length_m_, rel=1e-3)
-    assert part.chi2_ == pytest.approx(sum(full.chi2_curves_[1:]), rel=1e-9)
+    # the same SI law up to rounding, which the adaptive steps feel (measured 7e-10 and 2e-7
+    # relative for two far-term starts); a law reread in the wrong unit is off by orders
+    assert part.chi2_ == pytest.approx(sum(full.chi2_curves_[1:]), rel=1e-6)
 
 
 def test_a_flat_curve_keeps_its_surface_out_of_reach():
