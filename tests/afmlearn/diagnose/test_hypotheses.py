@@ -41,10 +41,12 @@ def test_extension_nests_the_baseline(hyp):
     base = BASE.columns(z, zd)
     assert np.allclose(ext[:, : base.shape[1]], base)     # baseline columns unchanged
     assert spec.library().n_terms >= BASE.library().n_terms
-    # the extension's own parameters change something
+    # the extension adds exactly one extension object (contact_geometry: frees the exponent)
+    assert len(spec.extensions) == (hyp.cause != "contact_geometry")
+    # the extension's own parameters reach the model (not only the nested point)
     if params:
         other = hyp.extend(BASE, [p.grid[-1] for p in params])
-        assert other != BASE
+        assert other != spec and other.term_keys() == spec.term_keys()
 
 
 def test_neck_state_holds_after_contact_until_the_snap():
