@@ -431,6 +431,20 @@ def upper_bound(k: int, n: int, conf: float = 0.95) -> float:
     return 1.0 if k >= n else float(stats.beta.ppf(conf, k + 1, n - k))
 
 
+def interval(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
+    """Two-sided ``conf`` Clopper--Pearson interval of a share seen ``k`` times in ``n``."""
+    a = (1 - conf) / 2
+    lo = 0.0 if k == 0 else float(stats.beta.ppf(a, k, n - k + 1))
+    hi = 1.0 if k >= n else float(stats.beta.ppf(1 - a, k + 1, n - k))
+    return lo, hi
+
+
+def share(k: int, n: int) -> str:
+    """``k/n = x %`` with its two-sided 95 % Clopper--Pearson interval in brackets."""
+    lo, hi = interval(k, n)
+    return f"{k}/{n} = {100 * k / n:.0f} % [{100 * lo:.0f}-{100 * hi:.0f}]"
+
+
 def _found(r: dict) -> list[str]:
     return [x["cause"] for x in r["causes_found"]] or [r["cause_found"]]
 
@@ -498,7 +512,7 @@ def series_section(records: list[dict], variants: list[tuple[int, bool, str]],
                 ok = [r for r in rs if _hit(r)] if c != "none" else \
                     [r for r in rs if r["cause_found"] == "none"]
                 gains = [r["gain"] for r in ok if c != "none"]
-                txt = f"{len(ok)}/{len(rs)} = {100 * len(ok) / len(rs):.0f} %"
+                txt = share(len(ok), len(rs))
                 if gains:
                     txt += f" ({fmt(float(np.median(gains)), 2)})"
                 cells.append(txt)
@@ -506,8 +520,9 @@ def series_section(records: list[dict], variants: list[tuple[int, bool, str]],
             rows.append(cells)
             prov.append(pcells)
         out.append(f"\n### {spp} samples/period, {100 * noise:g} % noise\n\nShare named "
-                   f"right, `k/n` (median held-out gain when right); `none`: no cause named; "
-                   f"`two effects`: both found among the sequential causes.\n\n"
+                   f"right, `k/n` [two-sided 95 % Clopper-Pearson interval, %] (median "
+                   f"held-out gain when right); `none`: no cause named; `two effects`: both "
+                   f"found among the sequential causes.\n\n"
                    + md_table(["true cause", *[vname[v] for v in vs]], rows)
                    + "\n\nCommits each cell rests on:\n\n"
                    + md_table(["true cause", *[vname[v] for v in vs]], prov))
@@ -529,15 +544,20 @@ def series_section(records: list[dict], variants: list[tuple[int, bool, str]],
             eff = [r for r in by[v] if r["cause"] != "none"]
             if not eff:
                 continue
-            first = sum(r["cause_found"] in r["cause"].split("+") for r in eff)
+            right = [r for r in eff if r["cause_found"] in r["cause"].split("+")]
             extra = sum(len(set(_found(r)) - set(r["cause"].split("+")) - {"none", "error"})
                         for r in eff)
-            extra_rows.append([vname[v], f"{first}/{len(eff)} = {100 * first / len(eff):.0f} %",
-                               str(extra)])
+            cpu = [r["t_cpu"] for r in eff if "t_cpu" in r]
+            extra_rows.append([vname[v], share(len(right), len(eff)),
+                               fmt(float(np.median([r["gain"] for r in right])), 2)
+                               if right else "-", str(extra),
+                               f"{np.median(cpu):.1f} / {max(cpu):.1f}" if cpu else "-"])
         if extra_rows:
-            out.append("\nEffect draws (one and two effects):\n\n" + md_table(
-                ["variant", "first cause right", "causes named that are not there"],
-                extra_rows))
+            out.append("\nEffect draws (one and two effects; first cause right with its "
+                       "two-sided 95 % Clopper-Pearson interval, %):\n\n" + md_table(
+                           ["variant", "first cause right", "median held-out gain when right",
+                            "causes named that are not there",
+                            "CPU time per diagnosis median / max [s]"], extra_rows))
         # null series and time
         t_rows = []
         for v in vs:
@@ -993,6 +1013,16 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
                     recs.append(r)
                 elif _newer(r["commit"], recs[at[k]].get("commit", "")):
                     recs[at[k]] = r
+        # records of another records folder (this benchmark's format, e.g. another
+        # engineer's variant on the same draws): added where this folder has no record of
+        # the same draw and variant (this folder's record wins)
+        want = {_series_key(j) for j in jobs}
+        for extra in _merge_paths(args.merge):
+            for r in _latest(extra, args.since):
+                k = _series_key(r)
+                if k in want and k not in at:
+                    at[k] = len(recs)
+                    recs.append(r)
     else:
         recs = run_series_jobs(jobs, rec_dir / "series.jsonl", args.workers, since=args.since)
     vis_path = rec_dir / "visibility.jsonl"
@@ -1007,6 +1037,10 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
              + [r for r in _latest(rec_dir / "series.jsonl", args.since) if r["cause"] == "none"])
     for extra in filter(None, args.harness.split(",")):
         nulls += [r for r in harness_records(Path(extra)) if r["cause"] == "none"]
+    own = {_series_key(r) for r in nulls}
+    for extra in _merge_paths(args.merge):
+        nulls += [r for r in _latest(extra, args.since)
+                  if r["cause"] == "none" and _series_key(r) not in own]
     if nulls:
         body += ("\n\n### Null series: false-cause rate with the shipped thresholds\n\n"
                  "The evaluation's null draws (out of sample: seeds disjoint from the "
@@ -1022,6 +1056,16 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
         body += "\n\n" + Path(args.note_file).read_text().strip()
     write_section(args.section, series_title(variants), body, info, write=not args.no_doc)
     return 0
+
+
+def _merge_paths(text: str) -> list[Path]:
+    """``--merge``: comma-separated ``series.jsonl`` files (or their records folders)."""
+    paths = [Path(p) for p in filter(None, text.split(","))]
+    paths = [p / "series.jsonl" if p.is_dir() else p for p in paths]
+    for p in paths:
+        if not p.exists():
+            raise ValueError(f"--merge: no records file {p}")
+    return paths
 
 
 def series_title(variants: list[tuple[int, bool, str]]) -> str:
@@ -1072,6 +1116,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--harness", default="",
                     help="series --report-only: comma-separated JSON-lines files of R's harness "
                          "(same draws) merged where this benchmark has no record")
+    ap.add_argument("--merge", default="",
+                    help="series --report-only: comma-separated series.jsonl files (or records "
+                         "folders) of this benchmark merged where --records has no record of "
+                         "the same draw and variant")
     ap.add_argument("--first", type=int, default=0,
                     help="series: first draw index of the single causes (split a run)")
     ap.add_argument("--oracle", action="store_true",

@@ -16,7 +16,9 @@ from bench_diagnose import (  # noqa: E402
     _draw_key,
     _parse_variant,
     calibrate,
+    interval,
     series_title,
+    share,
     upper_bound,
 )
 
@@ -48,6 +50,21 @@ def test_one_sided_bound_with_no_false_cause_is_the_rule_of_three_exact_form():
     assert upper_bound(3, 3) == 1.0
     # more false causes in the same number of nulls: a larger bound
     assert upper_bound(0, 30) < upper_bound(1, 30) < upper_bound(2, 30)
+
+
+def test_two_sided_interval_has_the_exact_clopper_pearson_ends():
+    # 0 of n: [0, 1 - 0.025^(1/n)]; n of n mirrors it; k of n mirrors n - k of n
+    for n in (3, 10, 20):
+        lo, hi = interval(0, n)
+        assert lo == 0.0 and hi == pytest.approx(1 - 0.025 ** (1 / n), rel=1e-9)
+        assert interval(n, n) == pytest.approx((0.025 ** (1 / n), 1.0), rel=1e-9)
+    for k in range(11):
+        lo, hi = interval(k, 10)
+        assert lo < k / 10 < hi or k in (0, 10)
+        assert (lo, hi) == pytest.approx(tuple(1 - x for x in interval(10 - k, 10)[::-1]))
+    # 9 of 10 right does not show a 90 % share at 95 %: the interval reaches down to 55.5 %
+    assert interval(9, 10)[0] == pytest.approx(0.555, abs=5e-4)
+    assert share(9, 10) == "9/10 = 90 % [55-100]"
 
 
 def test_variants_name_the_rows_and_the_design():
