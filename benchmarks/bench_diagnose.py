@@ -767,14 +767,21 @@ def series_calibrate(args: argparse.Namespace, settings: list[tuple[int, float]]
     the ``"series"`` section of ``null_calibration.json``, the single-record ones are kept.
     ``--design two``: null experiments of 2 free amplitudes x 4 set-points (``set_id`` 6,
     ``series_null_2amp.jsonl``) into the ``"series_amplitudes"`` section, which the
-    diagnosis selects for an experiment with more than one drive group."""
+    diagnosis selects for an experiment with more than one drive group. ``--no-phase`` (one
+    amplitude): null series with the drive phase removed from the files (``set_id`` 7,
+    ``series_null_nophase.jsonl``) into the ``"series_nophase"`` section, which the diagnosis
+    selects for a series without recorded drive phases."""
     two = args.design == "two"
-    set_id, section = (6, "series_amplitudes") if two else (5, "series")
+    nophase = args.no_phase and not two
+    set_id, section = ((6, "series_amplitudes") if two else (7, "series_nophase") if nophase
+                       else (5, "series"))
     what = ("null experiments of 2 free amplitudes x 4 set-points" if two
+            else "null 8-set-point series without the recorded drive phase" if nophase
             else "null 8-set-point series")
-    null_file = rec_dir / ("series_null_2amp.jsonl" if two else "series_null.jsonl")
+    null_file = rec_dir / ("series_null_2amp.jsonl" if two else
+                           "series_null_nophase.jsonl" if nophase else "series_null.jsonl")
     jobs = [{"set_id": set_id, "spp": spp, "noise": noise, "cause": "none", "index": i,
-             "seed": args.seed, "periods": args.periods, "n_points": 8, "phase": True,
+             "seed": args.seed, "periods": args.periods, "n_points": 8, "phase": not nophase,
              "design": args.design, "files": str(rec_dir / "series_null_files")}
             for i in range(args.null) for spp, noise in settings]
     if args.report_only:
@@ -782,7 +789,7 @@ def series_calibrate(args: argparse.Namespace, settings: list[tuple[int, float]]
         recs = [have[_series_key(j)] for j in jobs if _series_key(j) in have]
     else:
         recs = run_series_jobs(jobs, null_file, args.workers, since=args.since)
-    if args.keep_thresholds and not two:
+    if args.keep_thresholds and not two and not nophase:
         return series_null_check(recs, rec_dir, args)
     ok = [r for r in recs if r.get("candidates")]
     if not ok:
@@ -793,7 +800,9 @@ def series_calibrate(args: argparse.Namespace, settings: list[tuple[int, float]]
                   for r in ok)
     n_named = sum(r["cause_found"] != "none" for r in ok)
     idx = sorted(r["index"] for r in ok)
-    src = (calib.source.replace("null traces", f"{what} (drive phase recorded)")
+    phase_note = ("(drive phase not recorded: removed from the files)" if nophase
+                  else "(drive phase recorded)")
+    src = (calib.source.replace("null traces", f"{what} {phase_note}")
            + f"; {args.periods:g} periods per set-point; seeds: set_id {set_id}, seed {args.seed}, "
            f"draws {idx[0]}-{idx[-1]}; commits {_commits(ok)}; {len(recs) - len(ok)} raised; "
            f"{n_false}/{len(ok)} null series with a chi2 drop above these thresholds "
@@ -815,7 +824,7 @@ def series_calibrate(args: argparse.Namespace, settings: list[tuple[int, float]]
                                                            for r in ok}),
                        "periods_per_setpoint": args.periods, "n_points": 8,
                        "free_amplitudes": 2 if two else 1,
-                       "drive_phase": True, "family_rate": args.family_rate,
+                       "drive_phase": not nophase, "family_rate": args.family_rate,
                        "previous_thresholds": prev}}
     if not args.no_doc:
         tmp = CALIBRATION.with_suffix(".json.tmp")
@@ -1110,6 +1119,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--design", choices=("one", "two"), default="one",
                     help="series --calibrate: one free amplitude (8 set-points, section "
                          "'series') or two (2 x 4, section 'series_amplitudes')")
+    ap.add_argument("--no-phase", action="store_true",
+                    help="series --calibrate: null series with the drive phase removed "
+                         "(section 'series_nophase', set_id 7)")
     ap.add_argument("--keep-thresholds", action="store_true",
                     help="series --calibrate: keep the shipped thresholds, report and record "
                          "the false-cause rate on the null series (with the evaluation's)")

@@ -4,6 +4,8 @@ Clopper--Pearson bound of the null check."""
 
 from __future__ import annotations
 
+import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -17,6 +19,7 @@ from bench_diagnose import (  # noqa: E402
     _parse_variant,
     calibrate,
     interval,
+    series_calibrate,
     series_title,
     share,
     upper_bound,
@@ -92,3 +95,40 @@ def test_draw_keys_keep_old_records_and_separate_the_designs():
     assert _draw_key({**job, "design": "one"}) == old
     keys = {_draw_key({**job, "design": d}) for d in ("one", "two", "twin")}
     assert len(keys) == 3
+
+
+def test_no_phase_calibration_writes_its_own_section(tmp_path, monkeypatch):
+    """``--calibrate --no-phase`` reads the no-phase null records (set_id 7, phase False) and
+    writes the ``series_nophase`` section with its provenance; the recorded-phase ``series``
+    section stays as it was."""
+    import bench_diagnose
+
+    cal_file = tmp_path / "null_calibration.json"
+    series = {"thresholds": {"viscoelastic": 2.0}, "min_gain": 0.05, "source": "ser"}
+    cal_file.write_text(json.dumps({"thresholds": {"viscoelastic": 1.0}, "min_gain": 0.05,
+                                    "series": series}))
+    monkeypatch.setattr(bench_diagnose, "CALIBRATION", cal_file)
+    causes = ("higher_mode", "viscoelastic", "long_range_damping", "contact_geometry",
+              "adhesion_hysteresis", "electrostatic", "detector_nonlinearity")
+    n = 40
+    with (tmp_path / "series_null_nophase.jsonl").open("w") as f:
+        for i in range(n):        # viscoelastic drops 0..39 on the nulls, the others nothing
+            rec = {"set_id": 7, "spp": 200, "noise": 0.01, "cause": "none", "index": i,
+                   "seed": 2026, "periods": 30.0, "n_points": 8, "phase": False,
+                   "design": "one", "commit": "abc1234567", "cause_found": "none",
+                   "candidates": [{"cause": c, "delta_chi2": float(i) if c == "viscoelastic"
+                                   else 0.0} for c in causes]}
+            f.write(json.dumps(rec) + "\n")
+    args = argparse.Namespace(design="one", no_phase=True, null=n, seed=2026, periods=30.0,
+                              report_only=True, since="", keep_thresholds=False,
+                              family_rate=0.7, no_doc=False, workers=1)
+    assert series_calibrate(args, [(200, 0.01)], tmp_path) == 0
+    d = json.loads(cal_file.read_text())
+    assert d["series"] == series
+    sec = d["series_nophase"]
+    prov = sec["provenance"]
+    assert prov["set_id"] == 7 and prov["drive_phase"] is False
+    assert prov["n_null_series"] == n and prov["draws"] == [0, n - 1]
+    assert "drive phase not recorded" in sec["source"]
+    # level 0.7 / 7 = 0.1: the 0.9 quantile of 0..39 (linear interpolation) is 35.1
+    assert sec["thresholds"]["viscoelastic"] == pytest.approx(35.1)
