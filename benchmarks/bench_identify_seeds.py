@@ -10,8 +10,10 @@ series, 200 samples/period, 1 % noise, 600 recorded periods per row, recorded dr
 Every (experiment, true exponent, seed) is one ``run_joint`` of that benchmark
 (``ForceIdentifier(RecordedPhase(), n_bootstrap=0).fit_joint``), scored against the truth,
 with its CPU time (``time.process_time``, one thread). Records go to
-``outputs/bench_identify_s5/results.json`` keyed by ``--tag`` (the code state, e.g. "before",
-"after"), so an interrupted run resumes and code states sit side by side in one table.
+``outputs/bench_identify_s6/results.json`` keyed by ``--tag`` (the code state, e.g. "before",
+"after"), so an interrupted run resumes and code states sit side by side in one table. Records
+of an earlier store (``--import-from``, e.g. session 5's ``outputs/bench_identify_s5``) whose
+``identify_hash`` equals the current code's are copied in under ``--tag`` instead of re-run.
 
 Run: ``python benchmarks/bench_identify_seeds.py --tag after [--seeds 0,1,2]
 [--exponents 1.5,2.0,2.27] [--designs 2A,1A] [--report-only] [--no-doc]``
@@ -24,12 +26,13 @@ import argparse
 import os
 import statistics
 import time
+from pathlib import Path
 from typing import Any
 
 import _common as C  # first: puts the repository root on sys.path
 import bench_identify_accuracy as BA
 
-STORE = C.ROOT / "outputs" / "bench_identify_s5" / "results.json"
+STORE = C.ROOT / "outputs" / "bench_identify_s6" / "results.json"
 #: experiment name -> (points argument of run_joint, two free amplitudes?)
 DESIGNS = {"2A": ("8x2A", True), "1A": (8, False)}
 PERIODS = 600
@@ -50,6 +53,24 @@ def run_one(design: str, p: float, seed: int, periods: int) -> dict[str, Any]:
     rec["identify_hash"] = BA.identify_hash()
     rec["when"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     return rec
+
+
+def import_same_code(store: BA.Store, old: BA.Store, tag: str) -> int:
+    """Copy ``old``'s records made on the current identify code into ``store`` under ``tag``."""
+    now, n = BA.identify_hash(), 0
+    for key, rec in old.data.items():
+        new = "/".join([tag, *key.split("/")[1:]])
+        if rec.get("identify_hash") == now and new not in store.data:
+            store.put(new, {**rec, "imported_from": key})
+            n += 1
+    return n
+
+
+class _View:
+    """Records listed in the tables (a store's ``data`` merged with an earlier one's)."""
+
+    def __init__(self, data: dict[str, Any]) -> None:
+        self.data = data
 
 
 def _fmt_iv(iv: Any) -> str:
@@ -111,7 +132,13 @@ def main(argv: list[str] | None = None) -> str:
                     help="comma-separated tags listed in the tables (default: every tag)")
     ap.add_argument("--seeds", default="0,1,2")
     ap.add_argument("--exponents", default="1.5,2.0,2.27")
-    ap.add_argument("--designs", default="2A,1A")
+    ap.add_argument("--designs", default="1A,2A")
+    ap.add_argument("--import-from", default=None,
+                    help="results.json of an earlier store: its records made on the current "
+                         "identify code are copied in under --tag")
+    ap.add_argument("--before", default=None,
+                    help="results.json of an earlier store: its 'before' records are listed "
+                         "in the tables too (read only)")
     ap.add_argument("--periods", type=int, default=PERIODS)
     ap.add_argument("--report-only", action="store_true", help="tables from the records only")
     C.add_doc_flag(ap)
@@ -122,6 +149,8 @@ def main(argv: list[str] | None = None) -> str:
     seeds = [int(s) for s in args.seeds.split(",")]
     exps = [float(v) for v in args.exponents.split(",")]
     designs = args.designs.split(",")
+    if args.import_from:
+        import_same_code(store, BA.Store(Path(args.import_from)), args.tag)
     if not args.report_only:
         # the most telling first: every exponent at seed 0, then further seeds
         for seed in seeds:
@@ -137,7 +166,13 @@ def main(argv: list[str] | None = None) -> str:
                           flush=True)
     tags = sorted({k.split("/")[0] for k in store.data}) if args.tags is None \
         else args.tags.split(",")
-    t1, t2 = table(store, tags)
+    view = store
+    if args.before:
+        old = BA.Store(Path(args.before))
+        view = _View({**{k: v for k, v in old.data.items() if k.startswith("before/")},
+                      **store.data})
+        tags = sorted({*tags, "before"})
+    t1, t2 = table(view, tags)
     body = f"""
 Contact exponent over noise seeds (issue 12 goal: within ±0.1 of the truth with a 95 % profile
 interval ≤ 0.3, at 200 samples/period, 1 % noise, 8 set-points; force accuracy ≥ 99 % whole,

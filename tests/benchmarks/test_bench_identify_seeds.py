@@ -38,3 +38,19 @@ def test_summary_counts_goal_and_coverage_per_exponent() -> None:
     cells = [c.strip() for c in line.strip("|").split("|")]
     # seeds, median p, max |error|, median width, coverage, goal met, min whole %
     assert cells[3:10] == ["3", "1.450", "0.150", "0.27", "2/3", "1/3", "97.00"]
+
+
+def test_import_copies_only_records_of_the_current_identify_code(tmp_path, monkeypatch) -> None:
+    import bench_identify_accuracy as BA
+    import bench_identify_seeds as S
+
+    monkeypatch.setattr(BA, "identify_hash", lambda: "abc")
+    old = _Store({"after/2A/1.5/0/600": {**_rec(1.43, (1.27, 1.64), 0.99), "identify_hash": "abc"},
+                  "before/2A/1.5/0/600": {**_rec(1.30, (1.26, 1.54), 0.99),
+                                          "identify_hash": "old"}})
+    new = BA.Store(tmp_path / "results.json")
+    assert S.import_same_code(new, old, "main") == 1
+    assert set(new.data) == {"main/2A/1.5/0/600"}
+    assert new.data["main/2A/1.5/0/600"]["imported_from"] == "after/2A/1.5/0/600"
+    # a record already in the store is not overwritten
+    assert S.import_same_code(new, old, "main") == 0
