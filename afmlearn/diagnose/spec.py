@@ -23,8 +23,13 @@ hook:
 Every extension also fills :meth:`AbstractExtension.report` (its parameters, SI where they have
 units) and names its :attr:`~AbstractExtension.key`. The roles are the kernel's capabilities:
 any number of force terms, at most one neck, one extra mode and one output map (a second
-history law or a third mode would need the kernel extended first). Force coefficients are
-ordered baseline terms, force terms (in the order the causes were added), then the neck.
+history law or a third mode would need the kernel extended first).
+
+A spec's extensions are kept in one canonical order, whatever order they were added in: by
+role (force terms, neck, extra mode, output map), force terms by :data:`FORCE_TERM_ORDER` (the
+historical column order of the shipped causes), any other force term after those by its key.
+So two specs with the same extensions are equal (``==``, hash) and have the same coefficient
+layout: baseline terms, force terms, then the neck.
 """
 
 from __future__ import annotations
@@ -42,11 +47,17 @@ from afmlearn.identify.library import AFMLibrary, Indentation, InversePower, Ter
 from afmlearn.identify.library.base import AbstractTerm
 from simulator import Scales
 
-__all__ = ["ModelSpec", "AbstractExtension", "AbstractForceTerm", "AbstractNeck",
-           "AbstractExtraMode", "AbstractOutputMap", "neck_state", "invert_polynomial"]
+__all__ = ["ModelSpec", "FORCE_TERM_ORDER", "AbstractExtension", "AbstractForceTerm",
+           "AbstractNeck", "AbstractExtraMode", "AbstractOutputMap", "neck_state",
+           "invert_polynomial"]
 
 FloatArray = NDArray[np.float64]
 E = TypeVar("E", bound="AbstractExtension")
+
+#: Keys of the shipped force terms in their canonical column order (the order before extensions
+#: were objects: viscoelastic, long-range damping, electrostatic); a new force term goes after
+#: these, ordered by its key, with no change here.
+FORCE_TERM_ORDER: tuple[str, ...] = ("visco", "damping", "electrostatic")
 
 
 class AbstractExtension(abc.ABC):
@@ -161,8 +172,8 @@ class ModelSpec:
         ``p`` of ``delta^p`` (1.5: sphere).
     extensions : tuple of AbstractExtension
         The causes' extensions (distinct keys; at most one neck, extra mode and output map).
-        Stored ordered by role (force terms, neck, extra mode, output map), force terms in
-        the order given.
+        Stored in the canonical order (module docstring), not the order given: specs with
+        the same extensions are equal and have the same :meth:`term_keys`.
     """
 
     a0: float
@@ -183,13 +194,14 @@ class ModelSpec:
             if sum(isinstance(e, role) for e in exts) > 1:
                 raise ValueError(f"extensions: at most one {role.__name__} (the kernel "
                                  f"integrates one), got {keys}")
-        object.__setattr__(self, "extensions", tuple(sorted(exts, key=lambda e: e._rank)))
+        object.__setattr__(self, "extensions", tuple(sorted(exts, key=_canonical)))
 
     def replace(self, **changes: Any) -> ModelSpec:
         return dataclasses.replace(self, **changes)
 
     def with_extension(self, extension: AbstractExtension) -> ModelSpec:
-        """This spec extended by ``extension`` (replacing the one with the same key)."""
+        """This spec extended by ``extension`` (replacing the one with the same key; the
+        result is in the canonical order, whatever the order of the calls)."""
         exts = list(self.extensions)
         keys = [e.key for e in exts]
         if extension.key in keys:
@@ -292,6 +304,12 @@ class ModelSpec:
             assert attached is not None
             cols.append(self.neck.column(z, attached, self.a0)[:, None])
         return np.column_stack(cols)
+
+
+def _canonical(extension: AbstractExtension) -> tuple[int, int, str]:
+    """Sort key of an extension in a spec: role, then :data:`FORCE_TERM_ORDER`, then key."""
+    known = FORCE_TERM_ORDER.index(extension.key) if extension.key in FORCE_TERM_ORDER else None
+    return (extension._rank, len(FORCE_TERM_ORDER) if known is None else known, extension.key)
 
 
 def neck_state(z: FloatArray, a0: float, neck_length: float | None) -> NDArray[np.bool_]:

@@ -51,7 +51,7 @@ def test_embed_places_nested_coefficients_by_feature():
     coef = np.array([1.0, 0.003, 0.004, -1e-4, 2.0, -3e-3])       # K D B vdw contact elec
     out = ext.embed(base, coef)
     keys = ext.term_keys()
-    assert keys == ["vdw", "contact", "electrostatic", "visco", "neck"]
+    assert keys == ["vdw", "contact", "visco", "electrostatic", "neck"]
     assert out.size == 3 + len(keys)
     assert out[3 + keys.index("electrostatic")] == -3e-3
     assert out[3 + keys.index("visco")] == 0.0 and out[3 + keys.index("neck")] == 0.0

@@ -25,7 +25,18 @@ from scipy import stats
 
 import afmlearn.diagnose.synthetic as synthetic
 from afmlearn.diagnose import Diagnoser, NullCalibration
-from afmlearn.diagnose.hypotheses import AbstractHypothesis, Context, Parameter, Viscoelastic
+from afmlearn.diagnose.hypotheses import (
+    AbstractHypothesis,
+    Context,
+    DecayingDamping,
+    DetectorMap,
+    ElectrostaticTerm,
+    Neck,
+    Parameter,
+    SecondMode,
+    Viscoelastic,
+    ViscoelasticTerm,
+)
 from afmlearn.diagnose.hypotheses.base import energy_text, gain_text
 from afmlearn.diagnose.model import DiagnosisModel
 from afmlearn.diagnose.spec import AbstractForceTerm, ModelSpec
@@ -173,6 +184,32 @@ def test_new_cause_structure():
     kinds, p1 = model.kernel_args()[1:3]
     assert kinds[-1] == Kind.GAP_RATE and p1[-1] == -1.0
     assert model.parameters()["squeeze_film"] == "c z'/z" and "z^-1 z'" in model.equation()
+
+
+def test_extensions_are_kept_in_one_canonical_order():
+    """The same extensions added in any order give one spec (==, hash) and one column layout:
+    role first, the shipped force terms in their historical order, a new one after them."""
+    exts = [ViscoelasticTerm(exponent=0.5), DecayingDamping(decay=0.4),
+            ElectrostaticTerm(radius=0.5), SqueezeFilmTerm(), Neck(length=0.1),
+            SecondMode(frequency_ratio=6.3, quality_factor=400.0, force_gain=1.0),
+            DetectorMap(b2=0.01, b3=0.0)]
+    base = ModelSpec(a0=0.03)
+    specs = []
+    for seed in range(6):
+        order = np.random.default_rng(seed).permutation(len(exts))
+        spec = base
+        for j in order:
+            spec = spec.with_extension(exts[j])
+        specs.append(spec)
+        specs.append(ModelSpec(a0=0.03, extensions=tuple(exts[j] for j in order[::-1])))
+    assert all(s == specs[0] and hash(s) == hash(specs[0]) for s in specs)
+    assert len(set(specs)) == 1
+    keys = ["vdw", "contact", "visco", "damping", "electrostatic", "squeeze_film", "neck"]
+    assert all(s.term_keys() == keys for s in specs)
+    assert [e.key for e in specs[0].extensions] == [*keys[2:], "mode2", "detector"]
+    # replacing an extension keeps the layout; a different parameter is a different spec
+    other = specs[0].with_extension(ViscoelasticTerm(exponent=0.7))
+    assert other.term_keys() == keys and other != specs[0]
 
 
 @pytest.mark.slow
