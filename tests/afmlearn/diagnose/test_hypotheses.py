@@ -61,13 +61,14 @@ def test_neck_state_holds_after_contact_until_the_snap():
 
 
 def test_spec_holds_one_extension_per_key_ordered_by_role():
-    """Extensions are stored by role (force terms in the order added, then neck, extra mode,
-    output map); the same key replaces in place; the kernel's single roles are refused twice."""
+    """Extensions are stored by role (force terms in their canonical order, then neck, extra
+    mode, output map); the same key replaces in place; the kernel's single roles are refused
+    twice."""
     spec = BASE.with_extension(DetectorMap(0.1, 0.0)).with_extension(Neck(0.2))
     spec = spec.with_extension(ElectrostaticTerm(0.5)).with_extension(ViscoelasticTerm(0.5))
-    assert [e.key for e in spec.extensions] == ["electrostatic", "visco", "neck", "detector"]
-    assert spec.term_keys() == ["vdw", "contact", "electrostatic", "visco", "neck"]
-    assert spec.signs() == [-1, 1, -1, 1, -1]
+    assert [e.key for e in spec.extensions] == ["visco", "electrostatic", "neck", "detector"]
+    assert spec.term_keys() == ["vdw", "contact", "visco", "electrostatic", "neck"]
+    assert spec.signs() == [-1, 1, 1, -1, -1]
     assert spec.state_key == ("neck", "detector")
     moved = spec.with_extension(ElectrostaticTerm(0.7))
     assert moved.get(ElectrostaticTerm).radius == 0.7 and moved.term_keys() == spec.term_keys()
