@@ -69,10 +69,19 @@ def merge_calibration(found: Mapping[str, Any], calibration: Any,
     return out
 
 
+#: Fields a thermal calibration (scripts/calibrate.py's calibration.json) gives.
+THERMAL_FIELDS: tuple[str, ...] = ("resonance_frequency_hz", "quality_factor",
+                                   "spring_constant_n_per_m")
+
+
 def require(values: Mapping[str, Any], names: tuple[str, ...], path: Path | str) -> None:
-    """Raise one clear line naming the first missing calibration field and how to give it."""
+    """Raise one clear line naming the first missing calibration field and how to give it
+    (calibration.json only for the fields a thermal calibration gives)."""
     for name in names:
         if values.get(name) is None:
-            raise RecordingError(
-                f"{path}: missing calibration '{name}' (not in the file): pass {name}=VALUE "
-                "or calibration=calibration.json holding it")
+            how = (f"pass {name}=VALUE or calibration=calibration.json (scripts/calibrate.py)"
+                   if name in THERMAL_FIELDS else
+                   f"pass {name}=VALUE or put '# {name}: VALUE' in a CSV header (a thermal "
+                   "calibration does not give it)")
+            raise RecordingError(f"{path}: missing calibration '{name}' (not in the file): "
+                                 f"{how}")

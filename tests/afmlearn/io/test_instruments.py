@@ -204,8 +204,17 @@ def test_wrong_units_and_missing_calibration_are_one_line(tmp_path):
     with pytest.raises(RecordingError, match="does not fit deflection"):
         open_recording(odd)
     bare = _csv(tmp_path / "bare.csv", "# sample_rate_hz: 1e6\n", {"deflection_nm": np.zeros(50)})
-    with pytest.raises(RecordingError, match="missing calibration 'spring_constant_n_per_m'"):
+    with pytest.raises(RecordingError, match="missing calibration 'spring_constant_n_per_m'"
+                       r".*calibration=calibration.json \(scripts/calibrate.py\)"):
         open_recording(bare)
+    # a thermal calibration.json cannot give the drive: the message does not send you there
+    thermal = {"resonance_frequency_hz": 3e5, "quality_factor": 400.0,
+               "spring_constant_n_per_m": 40.0}
+    no_drive = _csv(tmp_path / "no_drive.csv", "# gap_m: 30e-9\n",
+                    {"time_us": np.arange(50.0), "deflection_nm": np.zeros(50)})
+    with pytest.raises(RecordingError, match="missing calibration 'drive_frequency_hz'") as err:
+        open_recording(no_drive, calibration=thermal)
+    assert "calibration.json" not in str(err.value) and "# drive_frequency_hz:" in str(err.value)
 
 
 def test_calibration_precedence_file_json_override(tmp_path):
