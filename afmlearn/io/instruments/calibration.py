@@ -9,9 +9,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from afmlearn.io.instruments.errors import RecordingError
+from afmlearn.io.instruments.errors import MissingCalibration, RecordingError
 
-__all__ = ["CALIBRATION_FIELDS", "load_calibration", "merge_calibration", "require"]
+__all__ = ["CALIBRATION_FIELDS", "THERMAL_FIELDS", "load_calibration", "merge_calibration",
+           "require"]
 
 #: Fields a calibration.json or an override may set (the trace format's names, SI units).
 CALIBRATION_FIELDS: tuple[str, ...] = (
@@ -83,5 +84,5 @@ def require(values: Mapping[str, Any], names: tuple[str, ...], path: Path | str)
                    if name in THERMAL_FIELDS else
                    f"pass {name}=VALUE or put '# {name}: VALUE' in a CSV header (a thermal "
                    "calibration does not give it)")
-            raise RecordingError(f"{path}: missing calibration '{name}' (not in the file): "
-                                 f"{how}")
+            raise MissingCalibration(f"{path}: missing calibration '{name}' (not in the "
+                                     f"file): {how}", field=name)

@@ -9,7 +9,8 @@ from typing import Any
 from afmlearn.io.instruments.afmformats_files import AfmformatsReader
 from afmlearn.io.instruments.asylum import AsylumReader
 from afmlearn.io.instruments.base import InstrumentReader
-from afmlearn.io.instruments.errors import RecordingError
+from afmlearn.io.instruments.calibration import THERMAL_FIELDS
+from afmlearn.io.instruments.errors import MissingCalibration, RecordingError
 from afmlearn.io.instruments.force_curve import ForceCurve
 from afmlearn.io.instruments.nanosurf import NanosurfReader
 from afmlearn.io.instruments.table import (
@@ -95,7 +96,17 @@ def open_traces(path: str | os.PathLike[str], *, calibration: Any = None,
     RecordingError
         Also when the file holds static force curves (no drive: not a trace).
     """
-    opened = open_recording(path, calibration=calibration, **overrides)
+    try:
+        opened = open_recording(path, calibration=calibration, **overrides)
+    except MissingCalibration as err:
+        if calibration is not None or overrides:
+            raise
+        # read as a trace= of an entry point, which passes no calibration: say how to add it
+        extra = (" (or calibration=calibration.json)" if err.field in THERMAL_FIELDS else "")
+        raise MissingCalibration(
+            f"{path}: missing calibration '{err.field}' (not in the file): convert it with the "
+            f"value first, `python scripts/convert.py input={path} output=trace.h5 "
+            f"{err.field}=VALUE`{extra}, then use trace=trace.h5", field=err.field) from None
     records = opened if isinstance(opened, list) else [opened]
     if not all(isinstance(r, Trace) for r in records):
         raise RecordingError(f"{path}: a static force curve (no drive) is not a trace: use "

@@ -215,6 +215,12 @@ def test_wrong_units_and_missing_calibration_are_one_line(tmp_path):
     with pytest.raises(RecordingError, match="missing calibration 'drive_frequency_hz'") as err:
         open_recording(no_drive, calibration=thermal)
     assert "calibration.json" not in str(err.value) and "# drive_frequency_hz:" in str(err.value)
+    # read as an entry point's trace= (no way to pass calibration there): convert first
+    with pytest.raises(RecordingError, match=r"convert it with the value first, `python "
+                       r"scripts/convert.py input=.*bare.csv output=trace.h5 "
+                       r"spring_constant_n_per_m=VALUE` \(or calibration=") as err:
+        read_trace(bare)
+    assert "\n" not in str(err.value)
 
 
 def test_calibration_precedence_file_json_override(tmp_path):
