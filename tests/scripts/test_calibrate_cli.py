@@ -45,7 +45,8 @@ def test_nanosurf_calibration_and_convert_takes_it(tmp_path, run_script):
     assert trace.spring_constant_n_per_m == pytest.approx(cal["spring_constant_n_per_m"])
 
 
-@pytest.mark.parametrize("kind", ["missing", "not_a_spectrum", "truncated", "bad_correction"])
+@pytest.mark.parametrize("kind", ["missing", "not_a_spectrum", "truncated", "bad_correction",
+                                  "flipped_spectrum"])
 def test_bad_input_exits_2_with_one_line(kind, tmp_path, run_script):
     args = [f"out_dir={tmp_path / 'o'}", "figures=false", "compare=false"]
     if kind == "missing":
@@ -56,7 +57,17 @@ def test_bad_input_exits_2_with_one_line(kind, tmp_path, run_script):
         bad = tmp_path / "t.nid"
         bad.write_bytes(NID.read_bytes()[:30_000])
         args.append(f"spectrum={bad}")
+    elif kind == "flipped_spectrum":
+        # bytes of the measured spectrum inside the fit range inverted: values < 0 or not finite
+        data = bytearray(NID.read_bytes())
+        for i in range(16_000, 20_000):
+            data[i] ^= 0xFF
+        bad = tmp_path / "f.nid"
+        bad.write_bytes(bytes(data))
+        args.append(f"spectrum={bad}")
     else:
         shutil.copy(NID, tmp_path / "ok.nid")
         args += [f"spectrum={tmp_path / 'ok.nid'}", "correction=sader"]
-    run_script.error_line("calibrate.py", *args)
+    line = run_script.error_line("calibrate.py", *args)
+    if kind == "flipped_spectrum":
+        assert "negative or non-finite" in line, line

@@ -68,6 +68,8 @@ def _damaged(kind: str, tmp: Path) -> tuple[Path, list[str], str]:
         return _truncated(JPK, tmp / "t.jpk-force", 0.6), [], "cannot be read"
     if kind == "flipped_ibw_header":
         return _flipped(IBW, tmp / "f.ibw", 0, 64), [], "cannot be read"
+    if kind == "flipped_ibw_data":  # the Amp column's bytes inverted (offset 384 + 2181*4)
+        return _flipped(IBW, tmp / "d.ibw", 9200, 11000), [], "d.ibw"
     if kind == "flipped_jpk":
         return _flipped(JPK, tmp / "f.jpk-force", 0, 200), [], "cannot be read"
     if kind == "missing_calibration":
@@ -88,7 +90,7 @@ def _damaged(kind: str, tmp: Path) -> tuple[Path, list[str], str]:
 
 @pytest.mark.parametrize("kind", [
     "empty", "unknown_format", "wrong_extension_ibw_as_jpk", "wrong_extension_jpk_as_ibw",
-    "truncated_ibw", "truncated_jpk", "flipped_ibw_header", "flipped_jpk",
+    "truncated_ibw", "truncated_jpk", "flipped_ibw_header", "flipped_ibw_data", "flipped_jpk",
     "missing_calibration", "wrong_units", "bad_calibration_json"])
 def test_bad_input_exits_2_with_one_line(kind, tmp_path, run_script):
     path, extra, fragment = _damaged(kind, tmp_path)

@@ -66,7 +66,8 @@ class AsylumReader(InstrumentReader):
         from igor2 import binarywave
 
         wave = binarywave.load(str(path))["wave"]
-        data = np.asarray(wave["wData"], dtype=float)
+        with np.errstate(invalid="ignore", over="ignore"):  # damaged values: checked below
+            data = np.asarray(wave["wData"], dtype=float)
         note = parse_note(wave.get("note", b""))
         labels = [_text(b) for b in (wave["labels"][1] if len(wave["labels"]) > 1 else [])]
         labels = labels[1:] if labels and labels[0] == "" else labels

@@ -50,6 +50,10 @@ class NanosurfReader(InstrumentReader):
             raise RecordingError(f"{path}: no thermal spectrum ('Spectrum FFT' amplitude "
                                  f"spectral density) in this .nid; found {list(data.index)}")
         asd = measured[0]
+        if (bad := int(np.sum(~np.isfinite(asd) | (asd < 0)))) or not asd.size:
+            raise RecordingError(f"{path}: the spectrum holds {bad} negative or non-finite "
+                                 f"values of {asd.size} (an amplitude spectral density is "
+                                 "finite and >= 0): corrupted file?")
         unit = str(param["Z"]["units"][0]) if "Z" in param else ""
         if unit and unit.replace(" ", "") != "m/sqrt(Hz)":
             raise RecordingError(f"{path}: spectrum in {unit!r}, expected m/sqrt(Hz) "
