@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hydra
 from _cli import bad_input_exits
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from afmlearn.freeosc.record import diagnose_recording
@@ -31,12 +32,16 @@ def _figures(diagnosis, y, prediction, out_dir, unit):
 def main(cfg: DictConfig) -> None:
     """Run :func:`afmlearn.freeosc.record.diagnose_recording` and print the finding."""
     calibration = OmegaConf.to_container(cfg.calibration, resolve=True) or {}
+    # the config's values fill only what the file does not state; command-line ones override
+    given = {o.split("=", 1)[0].lstrip("+~") for o in HydraConfig.get().overrides.task}
+    overrides = {k: v for k, v in calibration.items() if f"calibration.{k}" in given}
+    defaults = {k: v for k, v in calibration.items() if k not in overrides and v is not None}
     with bad_input_exits(ValueError, OSError):
         report = diagnose_recording(
             cfg.record, cfg.out_dir, heldout_fraction=cfg.heldout_fraction,
             lever_q=cfg.lever_q, block_periods=cfg.block_periods,
             figures=_figures if cfg.figures else None, column=cfg.column, unit=cfg.unit,
-            **calibration)
+            defaults=defaults, **overrides)
     print(f"cause       {report['cause']}  (confidence {report['confidence']:.2f})")
     print(f"gain        {report['gain']:.4f}  held-out NRMSE "
           f"{report['baseline']['heldout_nrmse']:.4g} -> {report['extended']['heldout_nrmse']:.4g}")

@@ -18,11 +18,13 @@ def test_synthetic_record_end_to_end(tmp_path, run_script):
     path = tmp_path / "record.h5"
     with h5py.File(path, "w") as f:
         f["s"] = 0.2 * y  # "nm"
+        f.attrs["sample_rate_hz"] = spp * 60e3  # the file's own rate beats the config's 1.15e6
     out = tmp_path / "out"
     code, stdout, err = run_script("diagnose_free.py", f"record={path}", f"out_dir={out}",
-                                   f"calibration.sample_rate_hz={spp * 60e3}", "block_periods=100")
+                                   "block_periods=100")
     assert code == 0, err
     report = json.loads((out / "report.json").read_text())
+    assert report["record"]["sample_rate_hz"] == spp * 60e3
     assert report["cause"] == "detector_nonlinearity"
     assert report["gain"] > 0.3
     assert (out / report["figures"][0]).stat().st_size > 10_000

@@ -98,6 +98,7 @@ class InstrumentReader(ABC):
                 f"{type(err).__name__}{': ' + reason if reason else ''}") from None
 
     def open(self, path: str | os.PathLike[str], *, calibration: Any = None,
+             defaults: Mapping[str, Any] | None = None,
              **overrides: Any) -> Trace | ForceCurve | list[Trace | ForceCurve]:
         """Read ``path`` into a `Trace` or a `ForceCurve` (a list of them for a multi-curve
         file), calibration merged in.
@@ -108,18 +109,23 @@ class InstrumentReader(ABC):
             The instrument file.
         calibration : str, os.PathLike or dict, optional
             A calibration.json (scripts/calibrate.py) or a dict of trace-format fields.
+        defaults : dict, optional
+            Trace-format fields used only where the file (and calibration.json) says nothing,
+            e.g. a script's placeholders, which must never replace what a file states.
         **overrides
             Trace-format fields (SI units) that replace the file's and calibration.json's
             values, and reading options (`READ_OPTIONS`).
         """
         path = Path(path)
-        unknown = set(overrides) - set(CALIBRATION_FIELDS) - set(READ_OPTIONS)
+        unknown = (set(overrides) - set(CALIBRATION_FIELDS) - set(READ_OPTIONS)) \
+            | (set(defaults or {}) - set(CALIBRATION_FIELDS))
         if unknown:
             raise RecordingError(f"unknown override(s) {sorted(unknown)}; allowed: "
                                  f"{sorted(CALIBRATION_FIELDS + READ_OPTIONS)}")
         options = {k: v for k, v in overrides.items() if k in READ_OPTIONS}
         given = {k: v for k, v in overrides.items() if k in CALIBRATION_FIELDS}
-        records = [self._build(p, merge_calibration(p.header, calibration, given), path)
+        records = [self._build(p, merge_calibration({**(defaults or {}), **p.header},
+                                                    calibration, given), path)
                    for p in self.parse(path, **options)]
         return records[0] if len(records) == 1 else records
 

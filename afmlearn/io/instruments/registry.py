@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -61,6 +62,7 @@ def is_instrument_file(path: str | os.PathLike[str]) -> bool:
 
 
 def open_recording(path: str | os.PathLike[str], *, calibration: Any = None,
+                   defaults: Mapping[str, Any] | None = None,
                    **overrides: Any) -> Trace | ForceCurve | list[Trace | ForceCurve]:
     """Open an instrument file as a `Trace` (dynamic records, lock-in curves) or a
     `ForceCurve` (static curves); a list for files holding several curves.
@@ -73,6 +75,9 @@ def open_recording(path: str | os.PathLike[str], *, calibration: Any = None,
         tunes hold spectra: `afmlearn.calibrate.read_spectrum`.)
     calibration : str, os.PathLike or dict, optional
         calibration.json from scripts/calibrate.py (or a dict of trace-format fields).
+    defaults : dict, optional
+        Trace-format fields used only where the file and calibration.json say nothing (a
+        script's placeholders never replace what the file states).
     **overrides
         Trace-format fields in SI units (``spring_constant_n_per_m=2.7``, ``gap_m=5e-9``
         ...), which win over calibration.json and the file; reading options ``column``,
@@ -84,7 +89,7 @@ def open_recording(path: str | os.PathLike[str], *, calibration: Any = None,
         One line: unknown format, damaged file, missing calibration (naming the field and how
         to supply it), wrong units.
     """
-    return reader_for(path).open(path, calibration=calibration, **overrides)
+    return reader_for(path).open(path, calibration=calibration, defaults=defaults, **overrides)
 
 
 def open_traces(path: str | os.PathLike[str], *, calibration: Any = None,

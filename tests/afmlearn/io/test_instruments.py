@@ -223,6 +223,16 @@ def test_wrong_units_and_missing_calibration_are_one_line(tmp_path):
     assert "\n" not in str(err.value)
 
 
+def test_defaults_fill_only_what_the_file_does_not_state(tmp_path):
+    path = _csv(tmp_path / "d.csv", CAL + "# gap_m: 30e-9\n", {"deflection_nm": np.zeros(50)})
+    t = open_recording(path, defaults={"sample_rate_hz": 2e6, "tip_radius_m": 7e-9})
+    assert t.sample_rate_hz == 1e6 and t.tip_radius_m == 7e-9      # file wins; gap filled
+    t = open_recording(path, defaults={"sample_rate_hz": 2e6}, sample_rate_hz=3e6)
+    assert t.sample_rate_hz == 3e6                                   # an override wins
+    with pytest.raises(RecordingError, match="unknown override"):
+        open_recording(path, defaults={"colour": 1})
+
+
 def test_calibration_precedence_file_json_override(tmp_path):
     cal = tmp_path / "calibration.json"
     cal.write_text(json.dumps({"quality_factor": 200.0, "quality_factor_interval": [190, 210],
