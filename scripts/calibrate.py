@@ -48,11 +48,15 @@ def main(cfg: DictConfig) -> None:
         lo, hi = result[f"{name}_interval"]
         print(f"{name:<26} {result[name]:.6g}  [{lo:.6g}, {hi:.6g}]")
     check = result.get("line_shape_check")
-    if check is not None:
+    if check is not None and check["supported"]:
         print(f"line shape: with a second oscillator at {check['second']['frequency_hz']:.6g} Hz "
               f"({100 * check['second']['power_share']:.1f} % of the power) the main Q is "
               f"{check['main']['quality_factor']:.4g}; reduced deviance "
               f"{check['reduced_deviance_single']:.3g} -> {check['reduced_deviance']:.3g}")
+    elif check is not None:
+        print(f"line shape: one oscillator describes the line (a second one lowers the deviance "
+              f"by {check['deviance_drop']:.3g}, below the {check['critical_drop']:.3g} a single "
+              "line reaches by chance)")
     for name, value in result.get("vendor", {}).items():
         print(f"vendor {name:<19} {value:.6g}")
     for note in result["notes"]:

@@ -7,7 +7,8 @@ temperature and correction, as the sum of two oscillators plus the white backgro
 from the single fit and a second peak at the largest smoothed excess of the data over it. It
 reports the main peak's f0, Q and k, the second peak's frequency, Q and share of the power,
 and the reduced deviance before and after: a large drop says the single-oscillator Q is a
-property of the fit, not of the lever.
+property of the fit, not of the lever. ``supported`` says whether the drop is larger than a
+single line would give by chance (3 more parameters; chi-square at `SECOND_PEAK_ALPHA`).
 """
 
 from __future__ import annotations
@@ -17,12 +18,16 @@ from typing import Any
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
+from scipy.stats import chi2
 
 from afmlearn.calibrate.sho import BOLTZMANN_J_PER_K, dc_level, mean_square, sho_psd
 from afmlearn.calibrate.spectrum import PowerSpectrum
 from afmlearn.calibrate.thermal import ThermalFit, _optimise
 
-__all__ = ["second_peak_check"]
+__all__ = ["second_peak_check", "SECOND_PEAK_ALPHA"]
+
+#: false-alarm probability of the second-oscillator test (a single line wrongly split)
+SECOND_PEAK_ALPHA = 1e-3
 
 
 def second_peak_check(spectrum: PowerSpectrum, fit: ThermalFit) -> dict[str, Any]:
@@ -32,8 +37,11 @@ def second_peak_check(spectrum: PowerSpectrum, fit: ThermalFit) -> dict[str, Any
     -------
     dict
         ``main`` (f0 [Hz], Q, k [N/m]), ``second`` (frequency [Hz], Q, share of the
-        oscillators' power), ``reduced_deviance`` (two peaks) and
-        ``reduced_deviance_single``.
+        oscillators' power), ``reduced_deviance`` (two peaks), ``reduced_deviance_single``,
+        ``deviance_drop`` (total deviance, single minus two peaks), ``critical_drop`` (the
+        chi-square point of 3 parameters at `SECOND_PEAK_ALPHA`, times the two-peak reduced
+        deviance when > 1) and ``supported`` (the drop exceeds it: the line is not one
+        oscillator).
     """
     f, p, e1 = fit.frequency_hz_, fit.observed_m2_per_hz_, fit.expected_m2_per_hz_
     f0, q, k, b = (fit.resonance_frequency_hz_, fit.quality_factor_,
@@ -74,6 +82,10 @@ def second_peak_check(spectrum: PowerSpectrum, fit: ThermalFit) -> dict[str, Any
              for i, j, m in (main, second)]
     dof = max(p.size - 7, 1)
     deviance = 2.0 * n_avg * float(np.sum(p / e2 - 1.0 - np.log(p / e2))) / dof
+    # the second oscillator's 3 parameters must lower the total deviance by more than the
+    # chi-square point at 0.1 % (scaled by the remaining overdispersion, if any)
+    drop = fit.reduced_deviance_ * max(p.size - 4, 1) - deviance * dof
+    critical = float(chi2.ppf(1.0 - SECOND_PEAK_ALPHA, 3)) * max(deviance, 1.0)
     return {
         "main": {"resonance_frequency_hz": float(theta[main[0]]),
                  "quality_factor": float(theta[main[1]]),
@@ -83,4 +95,7 @@ def second_peak_check(spectrum: PowerSpectrum, fit: ThermalFit) -> dict[str, Any
                    "power_share": float(power[1] / (power[0] + power[1]))},
         "reduced_deviance": deviance,
         "reduced_deviance_single": fit.reduced_deviance_,
+        "deviance_drop": float(drop),
+        "critical_drop": critical,
+        "supported": bool(drop > critical),
     }

@@ -178,9 +178,11 @@ def test_second_peak_check_finds_a_hidden_neighbour_and_leaves_a_single_line_alo
             assert check["reduced_deviance"] < 1.1
             assert check["main"]["quality_factor"] == pytest.approx(q, rel=0.05)
             assert check["second"]["frequency_hz"] == pytest.approx(178.9e3, abs=200)
+            assert check["supported"] and check["deviance_drop"] > 10 * check["critical_drop"]
         else:
             assert single.reduced_deviance_ < 1.1
             assert check["reduced_deviance"] > single.reduced_deviance_ - 0.05
+            assert not check["supported"]
 
 
 @pytest.mark.slow
