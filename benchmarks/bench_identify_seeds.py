@@ -78,15 +78,15 @@ def _fmt_iv(iv: Any) -> str:
 
 
 def table(store: BA.Store, tags: list[str]) -> tuple[str, str]:
-    """Per record, and a per-(tag, design, p) summary."""
+    """Per record, and a per-(tag, design, p, periods) summary."""
     rows, summ = [], []
-    groups: dict[tuple[str, str, float], list[dict[str, Any]]] = {}
+    groups: dict[tuple[str, str, float, int], list[dict[str, Any]]] = {}
     for key in sorted(store.data):
         tag, design, p, seed, per = key.split("/")
         if tag not in tags:
             continue
         rec = store.data[key]
-        groups.setdefault((tag, design, float(p)), []).append(rec)
+        groups.setdefault((tag, design, float(p), int(per)), []).append(rec)
         e, iv = rec.get("exponent"), rec.get("interval")
         a = rec["acc"]
         rows.append([tag, design, p, seed, per, "—" if e is None else f"{e:.3f}",
@@ -98,14 +98,14 @@ def table(store: BA.Store, tags: list[str]) -> tuple[str, str]:
                        for r in ("whole", "repulsive", "attractive", "near_a0")],
                      f"{rec['a0_over_true']:.2f}", f"{rec['cpu_s']:.0f}",
                      f"{rec['fit_s']:.0f} ({rec['load']:.1f})"])
-    for (tag, design, p), recs in sorted(groups.items()):
+    for (tag, design, p, per), recs in sorted(groups.items()):
         es = [r["exponent"] for r in recs if r.get("exponent") is not None]
         ivs = [r["interval"] for r in recs if r.get("interval")]
         ok = sum(1 for r in recs if r.get("exponent") is not None
                  and abs(r["exponent"] - p) <= 0.1 and r.get("interval")
                  and r["interval"][1] - r["interval"][0] <= 0.3)
         cover = sum(1 for iv in ivs if iv[0] <= p <= iv[1])
-        summ.append([tag, design, f"{p:g}", len(recs),
+        summ.append([tag, design, f"{p:g}", per, len(recs),
                      f"{statistics.median(es):.3f}" if es else "—",
                      f"{max(abs(e - p) for e in es):.3f}" if es else "—",
                      f"{statistics.median(iv[1] - iv[0] for iv in ivs):.2f}" if ivs else "—",
@@ -118,7 +118,7 @@ def table(store: BA.Store, tags: list[str]) -> tuple[str, str]:
                      "95 % interval", "width", "contains truth", "bounded", "whole %",
                      "repulsive %", "attractive %", "near a0 %", "a0 / true", "CPU [s]",
                      "wall [s] (load)"], rows)
-    t2 = C.md_table(["code", "design", "true p", "seeds", "median p", "max |error|",
+    t2 = C.md_table(["code", "design", "true p", "periods", "seeds", "median p", "max |error|",
                      "median width", "interval contains truth", "goal met (±0.1, width ≤ 0.3)",
                      "min whole %", "min repulsive %", "min near a0 %", "median CPU [s]"],
                     summ)

@@ -34,10 +34,19 @@ def test_summary_counts_goal_and_coverage_per_exponent() -> None:
     })
     rows, summary = table(store, ["after"])
     assert "before" not in rows and "before" not in summary
-    line = next(s for s in summary.splitlines() if "| after | 2A | 1.5 |" in s)
+    line = next(s for s in summary.splitlines() if "| after | 2A | 1.5 | 600 |" in s)
     cells = [c.strip() for c in line.strip("|").split("|")]
     # seeds, median p, max |error|, median width, coverage, goal met, min whole %
-    assert cells[3:10] == ["3", "1.450", "0.150", "0.27", "2/3", "1/3", "97.00"]
+    assert cells[4:11] == ["3", "1.450", "0.150", "0.27", "2/3", "1/3", "97.00"]
+
+
+def test_summary_keeps_record_lengths_apart() -> None:
+    store = _Store({"after/2A/2.0/0/600": _rec(1.86, (1.52, 2.21), 0.99),
+                    "after/2A/2.0/0/3600": _rec(1.98, (1.85, 2.12), 0.99)})
+    _, summary = table(store, ["after"])
+    rows = [s for s in summary.splitlines() if s.startswith("| after | 2A | 2 |")]
+    assert [r.split("|")[4].strip() for r in rows] == ["600", "3600"]
+    assert [r.split("|")[8].strip() for r in rows] == ["0.69", "0.27"]
 
 
 def test_import_copies_only_records_of_the_current_identify_code(tmp_path, monkeypatch) -> None:
