@@ -62,6 +62,10 @@ def _damaged(kind: str, tmp: Path) -> tuple[Path, list[str], str]:
         p = tmp / "curve.ibw"
         shutil.copy(JPK, p)
         return p, [], "cannot be read"
+    if kind == "wrong_extension_nid_as_csv":
+        p = tmp / "tune.csv"
+        shutil.copy(DATA / "nanosurf_thermal_tune" / "thermal.nid", p)
+        return p, [], "binary content, not a text CSV"
     if kind == "truncated_ibw":
         return _truncated(IBW, tmp / "t.ibw", 0.5), [], "cannot be read"
     if kind == "truncated_jpk":
@@ -90,6 +94,7 @@ def _damaged(kind: str, tmp: Path) -> tuple[Path, list[str], str]:
 
 @pytest.mark.parametrize("kind", [
     "empty", "unknown_format", "wrong_extension_ibw_as_jpk", "wrong_extension_jpk_as_ibw",
+    "wrong_extension_nid_as_csv",
     "truncated_ibw", "truncated_jpk", "flipped_ibw_header", "flipped_ibw_data", "flipped_jpk",
     "missing_calibration", "wrong_units", "bad_calibration_json"])
 def test_bad_input_exits_2_with_one_line(kind, tmp_path, run_script):

@@ -39,12 +39,25 @@ def _suffix(path: Path) -> str:
     return path.suffix.lower()
 
 
+def _is_binary(path: Path) -> bool:
+    """NUL or other control bytes (not tab/CR/LF/FF) in the first 4 kB; any 8-bit text
+    encoding (UTF-8, Latin-1 "µm") is text. A missing file is left to the reader."""
+    try:
+        with path.open("rb") as f:
+            head = f.read(4096)
+    except OSError:
+        return False
+    return any(b < 32 and b not in (9, 10, 12, 13) for b in head)
+
+
 def reader_for(path: str | os.PathLike[str]) -> InstrumentReader:
     """The reader of ``path`` by its suffix (a ``.csv`` goes to `CsvReader` when its header
     follows the column convention, else to afmformats); `RecordingError` if none fits."""
     path = Path(path)
     suffix = _suffix(path)
     if suffix == ".csv":
+        if _is_binary(path):
+            raise RecordingError(f"{path}: binary content, not a text CSV (wrong extension?)")
         return READERS[3] if is_convention_csv(path) else READERS[4]
     for reader in READERS:
         if suffix in reader.suffixes:
