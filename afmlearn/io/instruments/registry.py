@@ -127,8 +127,10 @@ def open_traces(path: str | os.PathLike[str], *, calibration: Any = None,
             f"{err.field}=VALUE`{extra}, then use trace=trace.h5", field=err.field) from None
     records = opened if isinstance(opened, list) else [opened]
     if not all(isinstance(r, Trace) for r in records):
-        raise RecordingError(f"{path}: a static force curve (no drive) is not a trace: use "
-                             "afmlearn.io.instruments.open_recording or scripts/convert.py")
+        raise RecordingError(f"{path}: a static force curve (no drive) is not a trace: analyse "
+                             "it with afmlearn.forcecurve.analyse_curve(afmlearn.io.instruments."
+                             "open_recording(path)) (docs/real_data.md) or convert it with "
+                             "scripts/convert.py")
     return records
 
 
