@@ -15,8 +15,9 @@ with its CPU time (``time.process_time``, one thread). Records go to
 of an earlier store (``--import-from``, e.g. session 5's ``outputs/bench_identify_s5``) whose
 ``identify_hash`` equals the current code's are copied in under ``--tag`` instead of re-run.
 
-Run: ``python benchmarks/bench_identify_seeds.py --tag after [--seeds 0,1,2]
-[--exponents 1.5,2.0,2.27] [--designs 2A,1A] [--report-only] [--no-doc]``
+Run: ``python benchmarks/bench_identify_seeds.py --tag main [--seeds 0,1,2]
+[--exponents 1.5,2.0,2.27] [--designs 1A,2A] [--periods 600] [--import-from OLD.json]
+[--before OLD.json] [--report-only] [--no-doc]``
 (one identification ~50-90 s CPU; run it niced, one thread).
 """
 
@@ -180,16 +181,20 @@ interval ≤ 0.3, at 200 samples/period, 1 % noise, 8 set-points; force accuracy
 amplitudes (rest gaps {BA.JOINT_TWO_AMP_GAPS} L_ref, free amplitudes
 {BA.JOINT_TWO_AMP_RATIOS[0]} and {BA.JOINT_TWO_AMP_RATIOS[-1]} L_ref), "1A" = 8 set-points at
 one free amplitude 1.5 L_ref (rest gaps {BA.JOINT_GAPS} L_ref); {PERIODS} recorded periods per
-row, recorded drive phase; p = 1.5 is `force=dmt`, p = 2 and 2.27 `force=dmt_cone` matched to
-the sphere at an indentation of {BA.DELTA_MATCH} L_ref. A seed draws every row's noise and drive
-phase anew (seed 0 is the series of `--joint`). "code": the code state the record was made
-with ("before": the session-4 identifier; "after": this session's profile, see
-docs/identify.md). CPU = `time.process_time` of one `fit_joint` (one thread, niced); wall time
-with the 1-min load average on the 2 shared cores. Force accuracy: design.md §4, pooled over
-the 8 set-points; "a0 / true": identified contact onset over the truth.
+row unless the "periods" column says otherwise (longer records: the design that reaches the
+width goal, docs/identify.md), recorded drive phase; p = 1.5 is `force=dmt`, p = 2 and 2.27
+`force=dmt_cone` matched to the sphere at an indentation of {BA.DELTA_MATCH} L_ref. A seed
+draws every row's noise and drive phase anew (seed 0 is the series of `--joint`). "code": the
+code state the record was made with ("before": the session-4 identifier, session 5's records
+in `outputs/bench_identify_s5`, listed with `--before`; "main": the identifier after the
+Jacobian-step fix and profile retries, eaa3bb8 — the 2A seed-0 rows at 600 periods were made
+in session 5 on the identical `afmlearn/identify` sources and imported, the rest in session 6).
+CPU = `time.process_time` of one `fit_joint` (one thread, niced; simulation excluded); wall
+time with the 1-min load average on the 2 shared cores. Force accuracy: design.md §4, pooled
+over the 8 set-points; "a0 / true": identified contact onset over the truth.
 
-Summary per code state, design and exponent ("max |error|": over the seeds; "min": the worst
-seed):
+Summary per code state, design, exponent and record length ("max |error|": over the seeds;
+"min": the worst seed):
 
 {t2}
 
