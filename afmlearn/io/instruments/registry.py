@@ -128,8 +128,8 @@ def open_traces(path: str | os.PathLike[str], *, calibration: Any = None,
     records = opened if isinstance(opened, list) else [opened]
     if not all(isinstance(r, Trace) for r in records):
         raise RecordingError(f"{path}: a static force curve (no drive) is not a trace: analyse "
-                             "it with afmlearn.forcecurve.analyse_curve(afmlearn.io.instruments."
-                             "open_recording(path)) (docs/real_data.md) or convert it with "
+                             f"it with `python scripts/analyze_force_curve.py curve={path}` "
+                             "(afmlearn.forcecurve.analyse_curve) or convert it with "
                              "scripts/convert.py")
     return records
 

@@ -251,7 +251,7 @@ def test_read_trace_and_experiment_accept_instrument_files(tmp_path):
     assert t.is_curves and t.spring_constant_n_per_m == 2.6955
     exp = Experiment.read(ON)
     assert len(exp) == 1 and exp.kind == "curves"
-    with pytest.raises(RecordingError, match="static force curve.*forcecurve.analyse_curve"):
+    with pytest.raises(RecordingError, match="static force curve.*analyze_force_curve.py curve="):
         read_trace(FORCE / "fmt-jpk-fd_spot3-0192.jpk-force")
     # the converted file is a trace-format-v1 file holding the same lock-in curve
     convert_recording(ON, tmp_path / "on.h5")
