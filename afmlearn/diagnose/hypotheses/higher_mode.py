@@ -16,12 +16,15 @@ mode, which the fit can still find through a harmonic, is "uncoupled" to it, so 
 no evidence against the cause (measured: on the diagnosis generator's ``higher_mode`` draws, share
 <= 3e-4, the probability does not separate them from ``none``, AUC 0.47). An observation
 whose measured next period the network forecasts with NRMSE > ``QRNN_MAX_FORECAST_NRMSE`` is
-outside its range and contributes nothing. The weight ``w = QRNN_WEIGHT`` and its justification
-(a logistic fit on out-of-distribution set-points) are in docs/diagnose.md and docs/qrnn.md.
+outside its range and contributes nothing. The network reads steady deflection records only:
+an approach ramp (``gap_m`` varying in time) or lock-in curves give no QRNN evidence (prior 0,
+said in the evidence text and logged once), never an error. The weight ``w = QRNN_WEIGHT``
+and its justification (a logistic fit on out-of-distribution set-points) are in docs/diagnose.md and docs/qrnn.md.
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +37,8 @@ from simulator import Scales
 from ..model import DiagnosisModel
 from ..spec import AbstractExtraMode, ModelSpec
 from .base import AbstractHypothesis, Context, Parameter, Probe, gain_text
+
+_log = logging.getLogger(__name__)
 
 __all__ = ["HigherMode", "SecondMode", "qrnn_log_odds", "QRNN_WEIGHT",
            "QRNN_MAX_FORECAST_NRMSE", "QRNN_MAX_LOG_ODDS"]
@@ -64,6 +69,15 @@ def qrnn_log_odds(evidence: Any, *, weight: float = QRNN_WEIGHT) -> float:
     if not ok.any():
         return 0.0
     return float(min(float(weight) * max(0.0, float(np.max(llr[ok]))), QRNN_MAX_LOG_ODDS))
+
+
+_NOT_STEADY = "it reads steady records only, not approach ramps or lock-in curves"
+
+
+def _is_steady(trace: Any) -> bool:
+    """True for a record the QRNN reads: a deflection record at one rest gap (not a ramp,
+    whose ``gap_m`` varies in time, nor lock-in curves without a deflection record)."""
+    return trace.deflection_m is not None and np.ndim(trace.gap_m) == 0
 
 
 @final
@@ -99,8 +113,9 @@ class HigherMode(AbstractHypothesis):
     qrnn : bool
         Also score every record with the shipped QRNN checkpoint's calibrated mode-coupling
         probability, report it, and add its positive evidence to the decision as prior
-        log-odds (module docstring). Any failure (no torch, no checkpoint, a record the
-        network refuses) raises.
+        log-odds (module docstring). Approach ramps and lock-in curves are not scored (the
+        network reads steady records only: prior 0, said in the evidence); any other failure
+        (no torch, no checkpoint, a steady record the network refuses) raises.
     qrnn_weight : float, default QRNN_WEIGHT
         Weight ``w`` of the network's log likelihood ratio (>= 0; 0: reported, not used).
     """
@@ -119,15 +134,21 @@ class HigherMode(AbstractHypothesis):
                      float(np.sum(np.square(t.deflection_m)))) for t in traces)
         if self._evidence is None or self._evidence[0] != key:
             from afmlearn.qrnn.evidence import coupling_probability
-            self._evidence = (key, [coupling_probability(t) for t in traces])
+            steady = [t for t in traces if _is_steady(t)]
+            if len(steady) < len(traces):
+                _log.info("higher_mode: %d of %d records are approach ramps or lock-in curves; "
+                          "the QRNN reads steady records only and gives them no evidence",
+                          len(traces) - len(steady), len(traces))
+            self._evidence = (key, [coupling_probability(t) for t in steady])
         return self._evidence[1]
 
     def prior_log_odds(self, probe: Probe) -> float:
-        """The QRNN's positive evidence (module docstring); 0 without ``qrnn``."""
+        """The QRNN's positive evidence (module docstring); 0 without ``qrnn`` or without a
+        steady record."""
         if not self.qrnn or self.qrnn_weight == 0.0:
             return 0.0
-        return max(qrnn_log_odds(ev, weight=self.qrnn_weight)
-                   for ev in self._qrnn_evidence(probe.traces))
+        return max((qrnn_log_odds(ev, weight=self.qrnn_weight)
+                     for ev in self._qrnn_evidence(probe.traces)), default=0.0)
 
     cause = "higher_mode"
     extension = "second eigenmode"
@@ -160,6 +181,10 @@ class HigherMode(AbstractHypothesis):
         if not self.qrnn:
             return {}
         evs = self._qrnn_evidence(probe.traces)
+        if not evs:
+            return {"qrnn_coupling": {"log_odds": 0.0, "weight": self.qrnn_weight,
+                                      "skipped": _NOT_STEADY},
+                    "text": f"QRNN not consulted ({_NOT_STEADY}; no log-odds added)"}
         probs = [float(p) for ev in evs for p in ev.probability]
         flag = any(bool(f) for ev in evs for f in ev.flag)
         lo = self.prior_log_odds(probe)

@@ -54,6 +54,7 @@ def test_log_odds_is_the_weighted_positive_likelihood_ratio():
 @dataclass
 class _Trace:
     deflection_m: np.ndarray
+    gap_m: float = 1e-8       # one rest gap: a steady record (ramps get no QRNN evidence)
 
 
 def test_hypothesis_prior_uses_each_record_once_and_only_when_asked(monkeypatch):
