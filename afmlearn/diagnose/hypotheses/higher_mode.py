@@ -19,7 +19,8 @@ whose measured next period the network forecasts with NRMSE > ``QRNN_MAX_FORECAS
 outside its range and contributes nothing. The network reads steady deflection records only:
 an approach ramp (``gap_m`` varying in time) or lock-in curves give no QRNN evidence (prior 0,
 said in the evidence text and logged once), never an error. The weight ``w = QRNN_WEIGHT``
-and its justification (a logistic fit on out-of-distribution set-points) are in docs/diagnose.md and docs/qrnn.md.
+and its justification (a logistic fit on out-of-distribution set-points) are in
+docs/diagnose.md and docs/qrnn.md.
 """
 
 from __future__ import annotations
