@@ -18,7 +18,8 @@ curves of the same group with N curves' fitted laws (transfer.json: gain on othe
 (one tip; the curves' k, f0 and Q must agree), each set spanning the free amplitudes, with the
 gain measured on a curve left out of the fit: <out_dir>/<sub-folder>/set_<k>/report.json and
 <out_dir>/joint_summary.json (the sets' agreement on the cause); `time_limit_s` is then per set.
-Bad input prints `error: ...` (one line) and exits with status 2.
+Bad input prints `error: ...` (one line) and exits with status 2 (a folder: when no file
+in it could be analysed).
 """
 
 from __future__ import annotations
@@ -64,6 +65,11 @@ def main(cfg: DictConfig) -> None:
                                      summary_figure=plot_parameter_spread if cfg.figures
                                      else None, time_limit_s=cfg.time_limit_s,
                                      resume=cfg.resume)
+            if summary["n_analysed"] == 0:  # every file damaged: bad input, as for one file
+                first = str(summary["curves"][0].get("error", "?")).splitlines()[0]
+                raise ValueError(f"trace: none of the {summary['n_files']} curve files in "
+                                 f"{cfg.trace} could be analysed (first: {first}); "
+                                 f"{cfg.out_dir}/summary.json lists them")
             print(f"causes: {summary['causes']} ({summary['n_analysed']} of "
                   f"{summary['n_files']} files)")
             for g, gs in summary["groups"].items():

@@ -50,6 +50,20 @@ def test_bad_input_exits_2_with_one_line(tmp_path, run_script, steady_path, case
     run_script.error_line("analyze_curves.py", f"trace={path}", f"out_dir={tmp_path}/o")
 
 
+def test_folder_of_damaged_files_exits_2_with_one_line(tmp_path, run_script):
+    folder = tmp_path / "damaged"
+    (folder / "On_Surface").mkdir(parents=True)
+    (folder / "On_Surface" / "a.ibw").write_bytes(b"not an igor wave")
+    (folder / "b.h5").write_bytes(b"not an hdf5 file")
+    line = run_script.error_line("analyze_curves.py", f"trace={folder}",
+                                 f"out_dir={tmp_path}/o", "figures=false")
+    assert "none of the 2 curve files" in line
+    # the per-file errors are still listed
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["n_analysed"] == 0 and len(summary["curves"]) == 2
+    assert all("error" in r for r in summary["curves"])
+
+
 @pytest.mark.slow
 def test_simulated_curve_end_to_end(tmp_path, curve_path):
     out = tmp_path / "out"
