@@ -72,11 +72,22 @@ def main(cfg: DictConfig) -> None:
     print(format_exponent(summary))
     for key in ("peak_repulsive_force_n", "dissipated_energy_per_cycle_j",
                 "contact_time_s", "state_accuracy_heldout"):
-        value = summary.get(key)
-        print(f"{key:<30}  {value:.6g}" if isinstance(value, float) else f"{key:<30}  {value}")
+        print(f"{key:<30}  {_shown(summary.get(key))}")
     for warning in result["warnings"]:
         print(f"warning: {warning}")
     print(f"wrote {result['files']['result']}")
+
+
+def _shown(value: object) -> str:
+    """A summary value for the terminal: numbers to 6 digits, per-observation lists element by
+    element, a value the pipeline does not compute for this input (None) said so."""
+    if value is None:
+        return "n/a (not computed for this input)"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_shown(v) for v in value) + "]"
+    return str(value)
 
 
 if __name__ == "__main__":

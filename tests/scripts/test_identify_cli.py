@@ -143,3 +143,17 @@ def test_series_file_all_rows_jointly_and_bad_row(tmp_path, run_script):
     res = json.loads((out / "result.json").read_text())
     assert res["joint"]["n_observations"] == 3
     assert (out / "force.png").exists()
+
+
+def test_summary_values_print_without_python_none() -> None:
+    """A value the pipeline does not compute for the input (a joint fit's held-out state
+    accuracy) is said so, not printed as ``None``; per-observation lists element by element."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        from identify import _shown
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    assert _shown(None) == "n/a (not computed for this input)"
+    shown = _shown([1.3402063609418025e-26, -1.6255220096485468e-24])
+    assert shown == "[1.34021e-26, -1.62552e-24]"
+    assert _shown(7.96279e-09) == "7.96279e-09"
