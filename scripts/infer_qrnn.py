@@ -19,6 +19,7 @@ import torch
 from _cli import bad_input_exits
 from omegaconf import DictConfig
 
+from afmlearn.plots.qrnn import inference_figures
 from afmlearn.qrnn.infer import infer
 
 
@@ -30,7 +31,7 @@ def main(cfg: DictConfig) -> None:
     with bad_input_exits(ValueError):  # includes afmlearn.io.TraceFormatError
         result = infer(cfg.trace, cfg.out_dir, checkpoint=cfg.checkpoint,
                        threshold=None if cfg.threshold is None else float(cfg.threshold),
-                       figures=bool(cfg.figures))
+                       figures=inference_figures if cfg.figures else None)
     if result["is_sweep"]:
         print(f"{result['n_traces']} sweep points, flagged coupled: "
               f"{result['flagged_fraction']:.0%}")

@@ -9,6 +9,9 @@
 `plot_reliability`
     Reliability diagram of coupling probabilities (observed coupled fraction per bin of
     predicted probability), several sets side by side, with the flag threshold.
+`inference_figures`
+    The figures of one inference (``prediction.png``, ``scores.png`` for sweeps), given to
+    :func:`afmlearn.qrnn.infer.infer` as its figure maker by ``scripts/infer_qrnn.py``.
 `plot_unit_activation`
     Mean hidden-unit activation vs drive frequency across a sweep: the modal shares on top, the
     units most correlated with each target below (``afmlearn.qrnn.interpret``).
@@ -31,7 +34,8 @@ from scipy.signal import savgol_filter
 
 from afmlearn.plots.trace import _save
 
-__all__ = ["plot_prediction", "plot_reliability", "plot_scores", "plot_unit_activation"]
+__all__ = ["inference_figures", "plot_prediction", "plot_reliability", "plot_scores",
+           "plot_unit_activation"]
 
 _MEASURED, _PREDICTED, _SWEET = "#1f77b4", "#d62728", "#2ca02c"
 
@@ -220,3 +224,47 @@ def plot_unit_activation(interp: Any, path: str | os.PathLike[str], *, title: st
             ax.axvspan(lo, hi, color=_SWEET, alpha=0.12)
     axes[-1].set_xlabel(r"drive frequency $\Omega = f / f_0$")
     return _save(fig, path)
+
+
+def inference_figures(result: dict[str, Any], out: Path, run: dict[str, Any]) -> list[str]:
+    """The figures of one QRNN inference (:func:`afmlearn.qrnn.infer.infer`'s ``figures=``).
+
+    ``prediction.png``: predicted vs measured deflection and orbit of one window (the trace,
+    or the sweep row with the highest coupling score); for sweeps also ``scores.png``
+    (coupling and sweet-spot score vs drive frequency, the interval shaded).
+
+    Parameters
+    ----------
+    result : dict
+        Output of :func:`afmlearn.qrnn.infer.predict_trace` (``summary`` and ``arrays``;
+        deflection windows normalised per input period, frequencies in Hz).
+    out : Path
+        Existing output folder.
+    run : dict
+        The checkpoint's run settings (``samples_per_period``).
+
+    Returns
+    -------
+    list of str
+        Paths written.
+    """
+    a = result["arrays"]
+    win = a["windows"]
+    p = int(run["samples_per_period"])
+    best_row = int(a["rows"][int(np.argmax(a["score"]))])
+    i = int(np.flatnonzero(win["row"] == best_row)[0])
+    u_in = win["x"][i, :, 0].astype(float)
+    measured = np.concatenate([u_in, win["y"][i].astype(float)])
+    off, sc = float(win["offset_m"][i]), float(win["scale_m"][i])
+    f = win["omega_rows"][best_row]
+    title = (f"row {best_row}, " if win["is_sweep"] else "") + f"Omega = {f:.4f}"
+    paths = [plot_prediction((off + sc * measured) * 1e9, (off + sc * a["pred"][i]) * 1e9,
+                             out / "prediction.png", samples_per_period=p, unit="nm",
+                             title=f"orbit prediction ({title})")]
+    s = result["summary"]
+    if s["is_sweep"]:
+        ivs = [tuple(x["interval_hz"]) if x["interval_hz"] else None for x in s["sweet_spot"]]
+        paths.append(plot_scores(a["frequency_hz"], a["score"], out / "scores.png",
+                                 sweet=a["sweet_score"], threshold=s["threshold"],
+                                 intervals=ivs, labels=[x["direction"] for x in s["sweet_spot"]]))
+    return [str(q) for q in paths]

@@ -12,7 +12,7 @@ predict, normalised by the input period) and runs the trained
     (sweep row), with its drive frequency, sweet-spot score and the NRMSE of the orbit forecast
     against the measured following periods; for sweeps, the sweet-spot interval of each sweep
     direction in Hz (or null); the checkpoint used; the model's settings.
-figures (``figures=True``)
+figures (``figures=`` a figure maker, e.g. :func:`afmlearn.plots.qrnn.inference_figures`)
     ``prediction.png`` (predicted vs measured deflection and orbit of one window: the trace, or
     the sweep row with the highest coupling score) and, for sweeps, ``scores.png`` (coupling and
     sweet-spot score vs drive frequency with the interval shaded).
@@ -31,6 +31,7 @@ checkpoint written by :func:`afmlearn.qrnn.train.train` (``last.ckpt``, the best
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -46,11 +47,16 @@ from afmlearn.qrnn.data import windows_from_trace
 from afmlearn.qrnn.evaluate import nrmse_per_period
 from afmlearn.qrnn.module import CHECKPOINT_KEY, OrbitModule
 
-__all__ = ["DEFAULT_CHECKPOINT", "calibration_of", "load_module", "predict_trace", "infer",
-           "coupling_summary"]
+__all__ = ["DEFAULT_CHECKPOINT", "FigureMaker", "calibration_of", "load_module",
+           "predict_trace", "infer", "coupling_summary"]
 
 #: checkpoint shipped with the package (trained by ``experiment=qrnn_default``)
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "qrnn_default.ckpt"
+
+#: draws the figures of one inference into a folder and returns their paths:
+#: ``maker(result, out_dir, run)`` with ``result`` the output of :func:`predict_trace` and
+#: ``run`` the checkpoint's run settings (the plots layer provides one; analyses never draw)
+FigureMaker = Callable[[dict[str, Any], Path, dict[str, Any]], list[str]]
 
 #: module arguments of the model config that inference does not need
 _NOT_FOR_INFERENCE = ("name", "net", "optimizer", "scheduler")
@@ -239,34 +245,9 @@ def predict_trace(trace: Trace | str | os.PathLike[str], module: OrbitModule,
                        "frequency_hz": f_rows[rows]}}
 
 
-def _figures(result: dict[str, Any], out: Path, run: dict[str, Any]) -> list[str]:
-    from afmlearn.plots.qrnn import plot_prediction, plot_scores
-
-    a = result["arrays"]
-    win = a["windows"]
-    p = int(run["samples_per_period"])
-    best_row = int(a["rows"][int(np.argmax(a["score"]))])
-    i = int(np.flatnonzero(win["row"] == best_row)[0])
-    u_in = win["x"][i, :, 0].astype(float)
-    measured = np.concatenate([u_in, win["y"][i].astype(float)])
-    off, sc = float(win["offset_m"][i]), float(win["scale_m"][i])
-    f = win["omega_rows"][best_row]
-    title = (f"row {best_row}, " if win["is_sweep"] else "") + f"Omega = {f:.4f}"
-    paths = [plot_prediction((off + sc * measured) * 1e9, (off + sc * a["pred"][i]) * 1e9,
-                             out / "prediction.png", samples_per_period=p, unit="nm",
-                             title=f"orbit prediction ({title})")]
-    s = result["summary"]
-    if s["is_sweep"]:
-        ivs = [tuple(x["interval_hz"]) if x["interval_hz"] else None for x in s["sweet_spot"]]
-        paths.append(plot_scores(a["frequency_hz"], a["score"], out / "scores.png",
-                                 sweet=a["sweet_score"], threshold=s["threshold"],
-                                 intervals=ivs, labels=[x["direction"] for x in s["sweet_spot"]]))
-    return [str(q) for q in paths]
-
-
 def infer(trace_path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
           checkpoint: str | os.PathLike[str] | None = None, threshold: float | None = None,
-          figures: bool = True) -> dict[str, Any]:
+          figures: FigureMaker | None = None) -> dict[str, Any]:
     """Run the model on a trace file and write ``coupling.json`` (+ figures) into ``out_dir``.
 
     Parameters
@@ -280,8 +261,9 @@ def infer(trace_path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *
     threshold : float, optional
         Flag threshold in (0, 1); default: the checkpoint's calibrated threshold (0.5 when
         uncalibrated).
-    figures : bool
-        Also write the PNG figures.
+    figures : FigureMaker, optional
+        Also draw the PNG figures with it (``scripts/infer_qrnn.py`` passes
+        :func:`afmlearn.plots.qrnn.inference_figures`); None: no figures.
 
     Returns
     -------
@@ -301,7 +283,7 @@ def infer(trace_path: str | os.PathLike[str], out_dir: str | os.PathLike[str], *
                          "samples_per_period": int(run["samples_per_period"]),
                          "horizon": int(run["horizon"])},
                **result["summary"]}
-    summary["figures"] = _figures(result, out, run) if figures else []
+    summary["figures"] = list(figures(result, out, run)) if figures is not None else []
     write_json(out / "coupling.json", summary)
     return {**summary, "output": str(out / "coupling.json")}
 

@@ -14,6 +14,7 @@ import pytest
 import torch
 
 from afmlearn.io import Trace, TraceFormatError, read_trace, write_trace
+from afmlearn.plots.qrnn import inference_figures
 from afmlearn.qrnn.data import windows_from_trace
 from afmlearn.qrnn.infer import (
     DEFAULT_CHECKPOINT,
@@ -52,7 +53,8 @@ def _with_broken_labels(path: Path) -> Path:
 def test_infer_on_a_sweep_file(tiny_run, tmp_path):
     trace = _sweep()
     path = _with_broken_labels(write_trace(trace, tmp_path / "sweep.h5"))
-    result = infer(path, tmp_path / "out", checkpoint=tiny_run["checkpoint"], threshold=0.4)
+    result = infer(path, tmp_path / "out", checkpoint=tiny_run["checkpoint"], threshold=0.4,
+                   figures=inference_figures)
     saved = json.loads((tmp_path / "out" / "coupling.json").read_text())
     assert saved["checkpoint"] == str(Path(tiny_run["checkpoint"]).resolve())
     assert saved["is_sweep"] and saved["n_traces"] == 6 and len(saved["traces"]) == 6
@@ -84,7 +86,8 @@ def test_infer_single_trace_and_summary(tiny_run, tmp_path):
                                              "drive_frequency_hz": sweep.drive_frequency_hz[0]})
     path = tmp_path / "one.h5"
     write_trace(single, path)
-    res = infer(path, tmp_path / "o", checkpoint=tiny_run["checkpoint"], figures=False)
+    res = infer(path, tmp_path / "o", checkpoint=tiny_run["checkpoint"])
+    assert res["figures"] == [] and not list((tmp_path / "o").glob("*.png"))
     assert not res["is_sweep"] and res["sweet_spot"] is None
     assert 0.0 <= res["score"] <= 1.0 and res["flag"] == (res["score"] >= res["threshold"])
     text = coupling_summary(path, checkpoint=tiny_run["checkpoint"])
@@ -146,7 +149,7 @@ def test_shipped_checkpoint_is_small_and_works(tmp_path):
     module, run, used = load_module()
     assert used == DEFAULT_CHECKPOINT and run["samples_per_period"] >= 16
     write_trace(_sweep(n=64 * (run["horizon"] + 3)), tmp_path / "s.h5")
-    res = infer(tmp_path / "s.h5", tmp_path / "out", figures=False)
+    res = infer(tmp_path / "s.h5", tmp_path / "out")
     assert res["checkpoint"] == str(DEFAULT_CHECKPOINT.resolve())
     assert all(0.0 <= t["score"] <= 1.0 for t in res["traces"])
 
@@ -189,3 +192,12 @@ def test_traces_outside_the_training_band_are_never_flagged(tiny_run, tmp_path):
     assert out["n_out_of_band"] == 6 and not any(t["flag"] for t in out["traces"])
     assert all(t["score"] > 1e-6 for t in out["traces"])          # still scored
     assert "never flagged" in coupling_summary(far, checkpoint=tiny_run["checkpoint"])
+
+
+def test_inference_never_imports_the_plots_layer():
+    """Layering: analyses never import afmlearn.plots (the figures are the caller's)."""
+    code = ("import sys, afmlearn.qrnn.infer, afmlearn.qrnn.evidence; "
+            "print(sorted(m for m in sys.modules if m.startswith('afmlearn.plots')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300, check=True).stdout.strip()
+    assert out == "[]"
