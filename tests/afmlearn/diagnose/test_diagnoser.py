@@ -263,6 +263,28 @@ def test_null_calibration_is_chosen_by_the_design(monkeypatch, tmp_path):
     assert cal.threshold("viscoelastic") == 2.0 and "without the drive phase" in cal.source
 
 
+def test_shipped_nophase_thresholds_come_from_their_own_nulls():
+    """The shipped ``series_nophase`` section: >= 32 null series with the drive phase removed,
+    seeded apart from the evaluation draws (seed 2027), every threshold at least the smallest
+    chi-square floor (1 parameter at the Bonferroni level), and read without a fallback."""
+    from importlib import resources
+
+    from scipy import stats
+
+    d = json.loads(resources.files("afmlearn.diagnose").joinpath("null_calibration.json")
+                   .read_text())
+    sec = d["series_nophase"]
+    prov = sec["provenance"]
+    assert prov["drive_phase"] is False and prov["free_amplitudes"] == 1
+    assert prov["n_null_series"] >= 32 and prov["seed"] != 2027
+    assert prov["set_id"] not in (d["series"]["provenance"]["set_id"], 3)
+    floor = stats.chi2.ppf(1 - prov["family_rate"] / len(sec["thresholds"]), 1)
+    assert min(sec["thresholds"].values()) >= floor - 1e-9
+    cal = NullCalibration.default("series_nophase")
+    assert cal.thresholds == sec["thresholds"] and "drive phase not recorded" in cal.source
+    assert "no calibration" not in cal.source
+
+
 def test_null_thresholds_follow_the_design():
     """One record, one amplitude with / without every recorded phase, several amplitudes."""
     assert null_kind(1, 1, True) == "single" and null_kind(1, 1, False) == "single"
