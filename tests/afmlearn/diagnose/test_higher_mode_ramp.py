@@ -68,7 +68,15 @@ def test_default_hypotheses_diagnose_a_ramp(make_series):
     from hydra.utils import instantiate
     from omegaconf import OmegaConf
 
-    ramp, _ = _ramp_and_rows(make_series("none", 3)[0])
+    _, rows = _ramp_and_rows(make_series("none", 3)[0])
+    # a slow ramp (1 % of L_ref per settling time, below MAX_RAMP_LAG: causes are tested)
+    y = np.concatenate([r.deflection_m for r in rows])
+    meta = rows[0].metadata()
+    g = float(np.mean([r.gap_m for r in rows]))
+    step = 0.01 * g / (meta["quality_factor"] / np.pi) * meta["drive_frequency_hz"] \
+        / meta["sample_rate_hz"]
+    ramp = Trace(y, **{**meta, "gap_m": g + step * (np.arange(y.size) - y.size / 2),
+                       "drive_phase_rad": None})
     cfg = OmegaConf.load(CONF / "diagnoser" / "default.yaml")
     cfg.max_ramp_windows = 3
     dg = instantiate(cfg)
