@@ -255,10 +255,13 @@ def _windows(i: int, t: Trace, c: Calibrated, prior: PhasePrior | None, window_p
                          f"{window_periods:g}")
     gap = np.asarray(c.gap, float)
     picks = np.unique(np.round(np.linspace(0, n_win - 1, min(n_win, max_windows))).astype(int))
-    # gap change over the settling time Q/pi periods, against the orbit's own size
-    rate = float(np.max(np.abs(np.diff(gap)))) * spp if gap.size > 1 else 0.0
+    # largest gap change over one settling time (Q/pi periods), in L_ref: a difference over
+    # that span (half the record if shorter, scaled), not a sample-to-sample slope (a
+    # measured Z-sensor gap's noise would be amplified by the samples per settling time)
     settle = c.quality_factor / math.pi
-    lag = rate * settle
+    m = min(max(1, int(round(settle * spp))), gap.size // 2)
+    lag = (float(np.max(np.abs(gap[m:] - gap[:-m]))) * settle * spp / m) if m >= 1 else 0.0
+    rate = lag / settle                      # L_ref per drive period
     if lag > _WARN_RAMP_LAG:
         # rate [L_ref per period] in SI: L_ref [m] x drive frequency [Hz]
         si = c.scales.length * c.omega * c.scales.resonance_frequency

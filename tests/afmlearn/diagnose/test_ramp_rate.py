@@ -50,6 +50,23 @@ def test_ramp_lag_is_the_gap_change_per_settling_time(make_series, lag):
         assert f"slower than {MAX_RAMP_LAG / settle * si * 1e9:.3g} nm/s" in w
 
 
+def test_ramp_lag_is_not_inflated_by_a_noisy_gap_record(make_series):
+    """A measured (Z-sensor) gap carries noise; the lag is a difference over one settling time
+    (here half the 80-period record, scaled), so 0.01 nm rms noise moves it by at most
+    ~2 x 4.5 sigma times that scale, where a sample-to-sample slope would multiply the noise
+    by the samples per settling time (measured before: lag 346 for a true 0.01)."""
+    ramp = _linear_ramp(make_series("none", 3)[0], 0.01)
+    sigma = 1e-11
+    noisy = Trace(ramp.deflection_m, **{**ramp.metadata(), "gap_m": ramp.gap_m
+                  + np.random.default_rng(0).normal(0.0, sigma, ramp.gap_m.size)})
+    obs = build_observations([noisy], phase_sd=0.02, window_periods=20.0, max_windows=3,
+                             warnings=[])
+    c = obs[0].cal
+    span = min(c.quality_factor / math.pi, c.n_samples / c.samples_per_period / 2)   # periods
+    bound = 2 * 4.5 * sigma / c.scales.length * (c.quality_factor / math.pi) / span
+    assert 0.01 - bound <= obs[0].ramp_lag <= 0.01 + bound < MAX_RAMP_LAG
+
+
 @pytest.mark.slow
 def test_too_fast_ramp_names_no_cause(make_series):
     ramp = _linear_ramp(make_series("none", 3)[0], 2.0)
