@@ -164,7 +164,9 @@ def scan_starts(oe: OutputError, jb: JointBalance, base_hb: Solution, current: S
     switched the mode off (drop 0, equation-error drop 423); started at the true ratio, 293.
     """
     if getattr(hyp, "energy_balance_start", False):
-        return energy_starts(oe, current, hyp, ctx)
+        starts = energy_starts(oe, current, hyp, ctx)
+        if starts:          # none without a calibrated drive and recorded phases: the grid scan
+            return starts
     params = hyp.parameters(ctx)
     scored = []
     for vals in itertools.product(*[p.grid for p in params]):
