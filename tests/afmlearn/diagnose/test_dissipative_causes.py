@@ -74,6 +74,11 @@ def test_damping_out_of_contact_is_not_named_viscoelastic(constructed):
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "visco-elastic search failure not fixed on the committed tree: at 460296f the visco fit "
+    "ends at chi2 332 (truth refit 162) and the damping term (186) is named; the energy start "
+    "(d661e3e) is shot warm from the output error's previous orbits, and its acceptance run "
+    "(168, named visco) was not reproduced on the committed code"))
 def test_viscoelastic_loss_is_not_named_damping(constructed):
     """The generating law is in the visco-elastic family (its refit from the truth: chi2 162
     for 4 x 83 rows), so the visco-elastic extension should reach the noise and be named.
@@ -82,8 +87,8 @@ def test_viscoelastic_loss_is_not_named_damping(constructed):
     the truth's: the fit from that start alone ended at chi2 11,938 and the damping term (223,
     held-out gain 0.96) was named (strict xfail until then). With the energy-balance start
     (``fit.energy_starts``: the coefficient from drive input minus lever loss per set-point)
-    the visco-elastic fit reaches 168 (held-out NRMSE 0.0036 against the damping term's
-    0.0044; the drops, 498 and 442, are a tie) and is named. Regression test of that start."""
+    the visco-elastic fit reached 168 in one development run (held-out NRMSE 0.0036 against the
+    damping term's 0.0044) and was named; on the committed tree it ends at 332 (xfail above)."""
     dg = constructed("viscoelastic")
     c = _cands(dg)
     assert dg.cause_ == "viscoelastic", dg.candidates_
