@@ -348,7 +348,10 @@ class Diagnoser:
     gain_ : float
         ``1 - NRMSE(extended) / NRMSE(baseline)`` on the held-out data (0 for ``none``).
     confidence_ : float
-        Of the first step's answer.
+        Of the first step's answer (0 when no cause was tested).
+    untested_reason_ : str or None
+        Why no cause was tested although hypotheses were given (a ramp too fast for
+        quasi-steady windows), else None.
     baseline_nrmse_, extended_nrmse_ : float
         Median held-out NRMSE over the held-out observations (robust to one set-point
         predicted on another branch).
@@ -463,6 +466,7 @@ class Diagnoser:
         self._check()
         hyps = default_hypotheses() if self.hypotheses is None else list(self.hypotheses)
         self.warnings_: list[str] = []
+        self.untested_reason_: str | None = None
         traces = as_traces(data, row)
         obs = build_observations(traces, phase_sd=float(self.drive_phase_sd),
                                  window_periods=float(self.ramp_window_periods),
@@ -547,10 +551,15 @@ class Diagnoser:
         self._rep = rep
         current = base_fit
         remaining = list(hyps)
-        if any(o.ramp_lag > MAX_RAMP_LAG for o in obs):
+        lag = max(o.ramp_lag for o in obs)
+        if lag > MAX_RAMP_LAG and hyps:
             # too fast for quasi-steady windows: their bias would be "explained" by causes
             # (observation.py; the warning names the rate and the limit)
             self._log("ramp too fast for quasi-steady windows: no cause is tested")
+            self.untested_reason_ = (
+                f"no cause was tested: the ramp moves the gap by {100 * lag:.3g} % of L_ref per "
+                f"settling time, above the {100 * MAX_RAMP_LAG:.0f} % limit of quasi-steady "
+                f"windows (see the warnings)")
             remaining = []
         steps: list[Step] = []
         first: list[Candidate] | None = None
@@ -603,7 +612,8 @@ class Diagnoser:
         self.candidates_ = first or []
         self.causes_ = steps
         self.cause_ = steps[0].cause if steps else "none"
-        self.confidence_ = conf0
+        # "none" because nothing was tested is no evidence for the baseline
+        self.confidence_ = 0.0 if self.untested_reason_ else conf0
         self._finish(base_fit, current, rep, obs, orbits, held, tested)
         self.runtime_s_ = time.perf_counter() - t0
         self._log(f"causes {[s.cause for s in steps] or ['none']} (gain {self.gain_:.3f}) in "

@@ -175,7 +175,8 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
         "afmlearn_version": afmlearn.__version__,
         "input": str(Path(input_path).resolve()),
         "row": row,
-        "explanation": (hyps[dg.cause_].explanation if dg.cause_ in hyps else _NONE_TEXT),
+        "explanation": (hyps[dg.cause_].explanation if dg.cause_ in hyps else
+                        dg.untested_reason_ or _NONE_TEXT),
         "observations": [
             {"index": o.index, "kind": o.kind, "gap_m": o.gap_m,
              "baseline_heldout_nrmse": o.baseline_nrmse,

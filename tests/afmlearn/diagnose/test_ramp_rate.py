@@ -73,6 +73,8 @@ def test_too_fast_ramp_names_no_cause(make_series):
     dg = Diagnoser(hypotheses=[HigherMode()], max_ramp_windows=3).fit(ramp)
     assert dg.cause_ == "none" and dg.causes_ == [] and dg.candidates_ == []
     assert any("no cause is named" in w for w in dg.warnings_)
+    # "none" because nothing was tested is no evidence for the baseline
+    assert dg.confidence_ == 0.0 and "no cause was tested" in dg.untested_reason_
 
 
 @pytest.mark.slow
