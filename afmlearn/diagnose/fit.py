@@ -163,7 +163,7 @@ def scan_starts(oe: OutputError, jb: JointBalance, base_hb: Solution, current: S
     (ratio 5.89) gave output-error chi2 2,357 against the baseline's 633, and the refinement
     switched the mode off (drop 0, equation-error drop 423); started at the true ratio, 293.
     """
-    if getattr(hyp, "energy_balance_start", False):
+    if hyp.energy_balance_start:
         starts = energy_starts(oe, current, hyp, ctx)
         if starts:          # none without a calibrated drive and recorded phases: the grid scan
             return starts

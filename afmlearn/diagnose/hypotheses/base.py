@@ -116,6 +116,9 @@ class AbstractHypothesis(abc.ABC):
     #: with a scan: refine both the equation-error start and the scan's best, keep the better
     #: (False: only the one with the lower output error before refinement)
     refine_both_starts: ClassVar[bool] = False
+    #: joint fits with a calibrated drive and recorded phases: the scan's starts come from the
+    #: energy balance per set-point (``fit.energy_starts``), the grid scan when there are none
+    energy_balance_start: ClassVar[bool] = False
 
     @abc.abstractmethod
     def parameters(self, ctx: Context) -> list[Parameter]:
