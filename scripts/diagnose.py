@@ -34,6 +34,7 @@ from omegaconf import DictConfig, ListConfig
 
 from afmlearn.curves import CurveDiagnoser
 from afmlearn.curves.analyze import analyze_curve, is_curve_file
+from afmlearn.diagnose.hypotheses.contact_geometry import exponent_summary
 from afmlearn.diagnose.report import diagnose_trace
 from afmlearn.plots.curves import curve_figures
 from afmlearn.plots.diagnose import plot_all
@@ -84,10 +85,8 @@ def main(cfg: DictConfig) -> None:
     print(f"baseline     {rep['baseline']['equation']}")
     print(f"extended     {rep['extended']['equation']}")
     if rep["contact_exponent"]:
-        ce = rep["contact_exponent"]
-        lo, hi = ce["interval_95"]
-        print(f"exponent     {ce['exponent']:.2f} (95 % interval {lo:.2f}-{hi:.2f}"
-              f"{'' if ce['bounded'] else '; the data do not bound it'})")
+        used = rep["extended"]["parameters"]["contact_exponent"]
+        print(f"exponent     {exponent_summary(rep['contact_exponent'], used=used)}")
     for warning in rep["warnings"]:
         print(f"warning: {warning}")
     print(f"report       {cfg.out_dir}/report.md")

@@ -7,11 +7,13 @@ never interpreted), fits a :class:`ForceIdentifier` and writes into ``out_dir`` 
 atomically: temporary sibling + ``os.replace``):
 
 ``result.json``
-    The equation (dimensionless and SI), the SI terms, the coefficients with their bagging
-    bands, the physical summary (interaction exponent, dissipated energy per cycle, peak
-    repulsive force, contact time, held-out state accuracy, ...), warnings, the calibration
-    used, the candidates table with the knee and AICc choices, runtime, afmlearn version and
-    the input path.
+    The equation to quote (dimensionless and SI; when the data do not bound the contact
+    exponent, the law re-fitted at the sphere's 1.5 and ``exponent_fixed`` says so, while
+    ``fitted_equation`` is the fitted law of model.json: :mod:`.fixed_exponent`), the SI
+    terms, the coefficients with their bagging bands, the physical summary (interaction
+    exponent, dissipated energy per cycle, peak repulsive force, contact time, held-out state
+    accuracy, ...), warnings, the calibration used, the candidates table with the knee and
+    AICc choices, runtime, afmlearn version and the input path.
 ``model.json``
     The chosen :class:`IdentifiedModel` (``IdentifiedModel.load`` reloads it).
 ``force.h5``
@@ -47,6 +49,7 @@ from afmlearn.io import Experiment, Trace, jsonable, read_trace, write_json
 from afmlearn.io._atomic import atomic_path
 from afmlearn.preprocess import Calibrated, calibrate, check_trace, checked_row
 
+from .fixed_exponent import fixed_exponent_law
 from .identifier import LINEAR_TERMS, ForceIdentifier
 from .library import AFMLibrary
 
@@ -331,6 +334,13 @@ def result_record(ide: ForceIdentifier, cal: Calibrated, *, input_path: str | os
     model = ide.model_
     bands = model.coefficient_bands
     si = model.si_terms()
+    summary = jsonable(ide.summary_)
+    # an exponent the data do not bound is not quoted: the law at the sphere's 1.5 instead
+    fixed = fixed_exponent_law(ide)
+    quoted = model if fixed is None or fixed.model is None else fixed.model
+    if fixed is not None:
+        summary["interaction_exponent_fixed"] = fixed.exponent
+        summary["interaction_exponent_note"] = fixed.text
     coefficients = []
     for j, (name, c) in enumerate(zip(model.library.names, model.coefficients, strict=True)):
         scale = si[j]["coefficient"] / c if c != 0 else math.nan
@@ -345,14 +355,19 @@ def result_record(ide: ForceIdentifier, cal: Calibrated, *, input_path: str | os
         "afmlearn_version": afmlearn.__version__,
         "input": str(Path(input_path).resolve()),
         "row": row,
-        "equation": model.equation(),
-        "equation_si": model.equation_si(),
+        "equation": quoted.equation(),
+        "equation_si": quoted.equation_si(),
+        # the fitted law (model.json, force.h5); differs from "equation" only when the
+        # exponent is fixed (exponent_fixed)
+        "fitted_equation": model.equation(),
+        "fitted_equation_si": model.equation_si(),
+        "exponent_fixed": None if fixed is None else jsonable(fixed.record()),
         "si_terms": si,
         "lever": {"stiffness": model.stiffness, "damping": model.damping,
                   "drive_amplitude": model.drive_amplitude, "drive_phase_rad": model.drive_phase,
                   "omega": model.omega, "a0": model.a0, "gap": model.gap},
         "coefficients": coefficients,
-        "summary": jsonable(ide.summary_),
+        "summary": summary,
         "warnings": list(ide.warnings_),
         "calibration": calibration_record(cal),
         "selection": {

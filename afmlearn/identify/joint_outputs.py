@@ -135,22 +135,29 @@ def joint_summary(res: JointResult, model: IdentifiedModel, forces: dict[str, Fl
 
 
 def format_exponent(summary: dict[str, Any]) -> str:
-    """One line: the exponent with its 95 % interval, or why there is none."""
+    """One line: the exponent with its 95 % interval, or why there is none; when the data do
+    not bound it, the summary's ``interaction_exponent_note`` (the exponent the quoted
+    equation uses, fixed, with the interval)."""
     p = summary.get("interaction_exponent")
     iv = summary.get("interaction_exponent_interval")
     if p is None:
         return "interaction exponent: no contact term identified"
     if iv is None or not all(_finite(v) for v in iv):
         return f"interaction exponent {p:.2f} (no profile interval)"
-    txt = f"interaction exponent {p:.2f} (95 % profile interval {iv[0]:.2f}-{iv[1]:.2f})"
-    bounded = summary.get("interaction_exponent_bounded")
-    if bounded is None:  # the single-orbit profile spans 0.5 ... 4
-        bounded = iv[0] > 0.5 + 1e-9 and iv[1] < 4.0 - 1e-9
-    if not bounded:
-        txt += ": NOT bounded by the data (the interval reaches the end of the profiled range)"
-    best = summary.get("interaction_exponent_profile_best")
-    if best is not None and not iv[0] <= p <= iv[1]:
-        txt += f"; the profile's best exponent is {best:.2f}, not the selected model's"
+    note = summary.get("interaction_exponent_note")
+    if note:  # not bounded: what the quoted equation uses (afmlearn.identify.fixed_exponent)
+        txt = str(note)
+    else:
+        txt = f"interaction exponent {p:.2f} (95 % profile interval {iv[0]:.2f}-{iv[1]:.2f})"
+        bounded = summary.get("interaction_exponent_bounded")
+        if bounded is None:  # the single-orbit profile spans 0.5 ... 4
+            bounded = iv[0] > 0.5 + 1e-9 and iv[1] < 4.0 - 1e-9
+        if not bounded:
+            txt += (": NOT bounded by the data (the interval reaches the end of the profiled "
+                    "range)")
+        best = summary.get("interaction_exponent_profile_best")
+        if best is not None and not iv[0] <= p <= iv[1]:
+            txt += f"; the profile's best exponent is {best:.2f}, not the selected model's"
     cv = summary.get("interaction_exponent_cv_interval")
     if cv is not None and all(_finite(v) for v in cv):
         txt += (f"; cross-validated over set-points {cv[0]:.2f}-{cv[1]:.2f}"

@@ -704,6 +704,8 @@ class OutputErrorProfile:
         in ``chi2 + n_u log(n_residuals)`` (the laws may differ in their number of terms), and
         a profile point better than every start is re-fitted with the exponent free.
         ``points``: further fixed-exponent fits (e.g. a scan's), merged into the envelope.
+        The table's ``fits`` maps every profiled exponent to its fit (the law quoted at a
+        fixed exponent when the data do not bound it: :mod:`afmlearn.identify.fixed_exponent`).
         """
         starts = [r for r in starts if r.law.exponent_index is not None]
         assert starts
@@ -742,7 +744,8 @@ class OutputErrorProfile:
         return ({"profile": prof, "interval": (lo, hi), "bounded": bounded,
                  "best_exponent": float(best.u[4]), "level": level,
                  "dispersion": best.dispersion, "objective": "output_error",
-                 "n_rows": n_eq, "laws": [r.law.library.names for r in starts]}, best)
+                 "n_rows": n_eq, "laws": [r.law.library.names for r in starts],
+                 "fits": {k: env[k][1] for k in ks}}, best)
 
     def _vertex(self, fit: OutputErrorFit, problem: JointProblem, meas: MeasuredHarmonics,
                 env: dict[float, tuple[float, OutputErrorResult]], best: OutputErrorResult

@@ -112,6 +112,11 @@ def check_trace(trace: Trace, *, row: int | None = None, min_samples_per_period:
             check_deflection(x, samples_per_period=trace.sample_rate_hz / f,
                              min_samples_per_period=min_samples_per_period,
                              min_periods=min_periods)
+        except UndersampledError:
+            # with the rate it takes at this drive frequency
+            raise UndersampledError(where + _undersampled_text(
+                trace.sample_rate_hz / f, min_samples_per_period,
+                rates=(trace.sample_rate_hz, f))) from None
         except InputError as err:
             raise type(err)(where + str(err)) from None
 
@@ -150,9 +155,8 @@ def check_deflection(x: ArrayLike, *, samples_per_period: float,
     if not (math.isfinite(samples_per_period) and samples_per_period > 0):
         raise CalibrationError(f"samples_per_period must be > 0, got {samples_per_period!r}")
     if samples_per_period < min_samples_per_period:
-        raise UndersampledError(
-            f"only {samples_per_period:.3g} samples per drive period; at least "
-            f"{min_samples_per_period:g} are needed (raise sample_rate_hz)")
+        raise UndersampledError(_undersampled_text(samples_per_period,
+                                                   min_samples_per_period))
     periods = x.size / samples_per_period
     if periods < min_periods:
         raise TooShortError(f"the deflection spans {periods:.3g} drive periods; at least "
@@ -163,6 +167,22 @@ def check_deflection(x: ArrayLike, *, samples_per_period: float,
             f"the deflection looks clipped (saturated): {run} consecutive samples sit at its "
             f"extreme value, a smooth peak allows at most {limit:.1f}; check the detector "
             "range and gain")
+
+
+def _undersampled_text(samples_per_period: float, min_samples_per_period: float, *,
+                       rates: tuple[float, float] | None = None) -> str:
+    """Why an undersampled row is refused and what to do: a recording cannot be fixed by
+    resampling (the harmonics above its Nyquist frequency were never sampled), a simulation
+    by its ``scenario.samples_per_period``. ``rates``: (sample rate, drive frequency) [Hz]."""
+    txt = f"only {samples_per_period:.3g} samples per drive period"
+    need = f"at least {min_samples_per_period:g} are needed"
+    if rates is not None:
+        rate, f = rates
+        txt += f" (sample_rate_hz {rate:.4g} Hz at a drive frequency of {f:.4g} Hz)"
+        need += f", i.e. a sample rate of at least {min_samples_per_period * f:.4g} Hz"
+    return (f"{txt}; {need}: record at a higher sample rate (resampling a recording cannot "
+            "restore the harmonics it did not sample); for a simulation raise "
+            "scenario.samples_per_period")
 
 
 def clipped_run(x: ArrayLike, *, samples_per_period: float) -> tuple[int, float]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -57,6 +58,24 @@ def test_identify_writes_result_and_aligned_force(tmp_path, trace_path):
     assert res["summary"]["peak_repulsive_force_n"] == pytest.approx(np.nanmax(force))
     assert (out / "model.json").exists() and not list(out.glob("*.png"))
     assert (out / ".hydra" / "config.yaml").exists()
+    # 30 periods of one orbit do not bound the contact exponent (physics: one indentation
+    # depth); the equation printed and stored is the law at the sphere's 1.5, re-fitted there
+    summary = res["summary"]
+    assert summary["interaction_exponent_bounded"] is False
+    fixed = res["exponent_fixed"]
+    assert fixed["exponent"] == 1.5 and summary["interaction_exponent_fixed"] == 1.5
+    assert res["equation"] == fixed["equation"]
+    assert re.search(r"delta\^1\.5(?![0-9])", res["equation"])
+    assert re.search(r"delta\^1\.5(?![0-9])", res["equation_si"])
+    # the refit is a fit: inside the 95 % profile interval (rise below 3.84), a0 in range
+    assert -1.0 < fixed["profile_rise"] < 3.841
+    assert 0 < fixed["a0"] <= 1
+    lines = proc.stdout.splitlines()
+    assert lines[0] == res["equation"]
+    line = next(ln for ln in lines if ln.startswith("interaction exponent"))
+    assert line.startswith("interaction exponent 1.5 FIXED") and "not identifiable" in line
+    assert "0.50-4.00" in line  # the unbounded interval stays in the text
+    assert "None" not in proc.stdout
 
 
 def _copy(src: Path, dst: Path, edit) -> Path:
@@ -84,7 +103,8 @@ def _undersample(f: h5py.File) -> None:
 BAD = {
     "missing_calibration": (lambda f: f.attrs.__delitem__("spring_constant_n_per_m"),
                             "spring_constant_n_per_m"),
-    "undersampled": (_undersample, "samples per"),
+    # a recorded file cannot be resampled into more harmonics: say what to record
+    "undersampled": (_undersample, "record at a higher sample rate"),
     "clipped": (_clip, "clip"),
     "nan": (_nan, "NaN"),
 }
@@ -112,6 +132,9 @@ def test_bad_input_exits_non_zero_with_a_clear_message(tmp_path, trace_path, cas
                                  "identifier=fast")
     assert needle.lower() in line.lower(), line
     assert not (out / "result.json").exists()
+    if case == "undersampled":  # the rate it takes, and the parameter of a simulation
+        assert "15 samples per drive period" in line and "at least 20 are needed" in line
+        assert "scenario.samples_per_period" in line and "Hz" in line
 
 
 def test_missing_file(tmp_path, run_script):
@@ -142,6 +165,17 @@ def test_series_file_all_rows_jointly_and_bad_row(tmp_path, run_script):
     assert "interaction exponent" in proc.stdout or "no contact term" in proc.stdout
     res = json.loads((out / "result.json").read_text())
     assert res["joint"]["n_observations"] == 3
+    # 3 short set-points of one free amplitude: the equation never quotes an unbounded
+    # exponent at its profile value (the audit's "delta^3.84114", interval 0.50-4.00)
+    summary = res["summary"]
+    if summary.get("interaction_exponent_bounded") is False:
+        fixed = res["exponent_fixed"]
+        assert fixed is not None and fixed["text"] in proc.stdout
+        if fixed.get("equation"):
+            assert res["equation"] == fixed["equation"]
+            assert re.search(r"delta\^1\.5(?![0-9])", res["equation"])
+        else:
+            assert "NOT an identified exponent" in fixed["text"] or fixed["exponent"] is None
     assert (out / "force.png").exists()
 
 

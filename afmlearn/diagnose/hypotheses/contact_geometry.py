@@ -7,11 +7,13 @@ from typing import Any, final
 
 import numpy as np
 
+from afmlearn.identify.fixed_exponent import SPHERE_EXPONENT
+
 from ..model import DiagnosisModel
 from ..spec import ModelSpec
 from .base import AbstractHypothesis, Context, Parameter, Probe, gain_text
 
-__all__ = ["ContactGeometry"]
+__all__ = ["ContactGeometry", "exponent_summary"]
 
 
 @final
@@ -82,5 +84,49 @@ class ContactGeometry(AbstractHypothesis):
 
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
                  energy=None) -> str:
-        return (f"force-indentation exponent {model.spec.contact_exponent:.2f} instead of "
-                f"1.5; chi2 drop {delta_chi2:.1f}, held-out gain {gain_text(gain)}")
+        """What freeing the exponent changed (the interval follows in :meth:`details`'s text):
+        the fitted exponent against the sphere's, or that it stayed there."""
+        p = float(model.spec.contact_exponent)
+        moved = (f"freed, the force-indentation exponent moved from the sphere's "
+                 f"{SPHERE_EXPONENT:g} to {p:.2f}" if abs(p - SPHERE_EXPONENT) >= 5e-3 else
+                 f"freed, the force-indentation exponent stayed at the sphere's "
+                 f"{SPHERE_EXPONENT:g}")
+        return f"{moved}; chi2 drop {delta_chi2:.1f}, held-out gain {gain_text(gain)}"
+
+
+def exponent_summary(contact_exponent: dict[str, Any], *, used: float) -> str:
+    """The contact exponent for a user who will quote it: one clause.
+
+    Parameters
+    ----------
+    contact_exponent : dict
+        report.json's ``contact_exponent``: ``exponent`` (the free fit's), ``interval_95``
+        (lo, hi) and ``bounded``.
+    used : float
+        The exponent of the final (extended) model's equations.
+
+    Returns
+    -------
+    str
+        Bounded: the exponent and its interval (and the equations' exponent when they keep
+        the sphere's). Not bounded: the exponent the equations use, said to be fixed because
+        the data do not identify it, with the interval - never the free fit's edge value as
+        if it were measured.
+    """
+    p = float(contact_exponent["exponent"])
+    lo, hi = (float(v) for v in contact_exponent["interval_95"])
+    if contact_exponent.get("bounded"):
+        txt = f"{p:.2f} (95 % interval {lo:.2f}-{hi:.2f})"
+        if abs(used - p) >= 5e-3:
+            txt += f"; the final equations use {used:.3g}"
+        return txt
+    where = f"95 % interval {lo:.2f}-{hi:.2f} reaches the end of the searched range"
+    if lo - 1e-9 <= used <= hi + 1e-9:
+        if abs(used - SPHERE_EXPONENT) < 5e-3:
+            return (f"{SPHERE_EXPONENT:g} (the sphere's), fixed in the equations: not "
+                    f"identifiable from these data ({where})")
+        return (f"{used:.2f} in the equations, but not identifiable from these data "
+                f"({where}): quote it only with that interval")
+    side = f"at least {lo:.2f}" if used < lo else f"at most {hi:.2f}"
+    return (f"{side}, not bounded on the other side ({where}); the equations use {used:g}, "
+            "outside it")
