@@ -65,9 +65,10 @@ def main(cfg: DictConfig) -> None:
             rep = analyze_curve(trace, cfg.out_dir, index=cfg.row or 0,
                                 diagnoser=CurveDiagnoser(**curves) if curves else None,
                                 figures=curve_figures if cfg.figures else None)
-        print(f"cause        {rep['cause']}  (confidence {rep['confidence']:.2f})")
-        print(f"gain         {rep['gain']:.3f}  (held-out NRMSE, retraction "
-              f"{rep['baseline']['heldout_nrmse']:.4g} -> {rep['extended']['heldout_nrmse']:.4g})")
+        print(f"cause        {rep['cause']}  (confidence {_num(rep['confidence'], '.2f')})")
+        print(f"gain         {_num(rep['gain'], '.3f')}  (held-out NRMSE, retraction "
+              f"{_num(rep['baseline']['heldout_nrmse'], '.4g')} -> "
+              f"{_num(rep['extended']['heldout_nrmse'], '.4g')})")
         print(f"baseline     {rep['baseline']['equation']}")
         print(f"extended     {rep['extended']['equation']}")
         print(f"report       {cfg.out_dir}/report.json")
@@ -76,12 +77,13 @@ def main(cfg: DictConfig) -> None:
         diagnoser = instantiate(cfg.diagnoser)
         rep = diagnose_trace(trace, cfg.out_dir, row=cfg.row, diagnoser=diagnoser,
                              figures=plot_all if cfg.figures else None)
-    print(f"cause        {rep['cause']}  (confidence {rep['confidence']:.2f})")
+    print(f"cause        {rep['cause']}  (confidence {_num(rep['confidence'], '.2f')})")
     if len(rep["causes"]) > 1:
-        print("causes       " + ", then ".join(f"{c['cause']} (gain {c['gain']:+.3f})"
+        print("causes       " + ", then ".join(f"{c['cause']} (gain {_num(c['gain'], '+.3f')})"
                                               for c in rep["causes"]))
-    print(f"gain         {rep['gain']:.3f}  (held-out NRMSE {rep['baseline']['heldout_nrmse']:.4g}"
-          f" -> {rep['extended']['heldout_nrmse']:.4g})")
+    print(f"gain         {_num(rep['gain'], '.3f')}  (held-out NRMSE "
+          f"{_num(rep['baseline']['heldout_nrmse'], '.4g')} -> "
+          f"{_num(rep['extended']['heldout_nrmse'], '.4g')})")
     print(f"baseline     {rep['baseline']['equation']}")
     print(f"extended     {rep['extended']['equation']}")
     if rep["contact_exponent"]:
@@ -90,6 +92,14 @@ def main(cfg: DictConfig) -> None:
     for warning in rep["warnings"]:
         print(f"warning: {warning}")
     print(f"report       {cfg.out_dir}/report.md")
+
+
+def _num(value: object, fmt: str) -> str:
+    """A report number for the terminal; one the record does not hold (None: not computed,
+    or NaN/inf turned into null by the JSON record) is said so, not printed as ``None``."""
+    if value is None:
+        return "n/a (not computed)"
+    return format(value, fmt)
 
 
 if __name__ == "__main__":

@@ -59,7 +59,7 @@ def main(cfg: DictConfig) -> None:
                                  diagnoser=CurveDiagnoser(**curves) if curves else None,
                                  figures=curve_figures if cfg.figures else None)
         print(res["equation"])
-        print(f"held-out NRMSE (retraction)     {res['heldout_nrmse']:.4g}")
+        print(f"held-out NRMSE (retraction)     {_shown(res['heldout_nrmse'])}")
         print(f"wrote {cfg.out_dir}/result.json")
         return
     with bad_input_exits(ValueError):  # InputError, TraceFormatError, bad settings

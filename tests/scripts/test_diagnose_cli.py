@@ -49,3 +49,30 @@ def test_bad_input_exits_2(tmp_path, trace_path, run_script, args, needle):
     line = run_script.error_line("diagnose.py",
                                  *[a for a in base if a.split("=")[0] not in over], *args)
     assert needle in line, line
+
+
+def test_printed_verdict_has_no_python_none_and_no_edge_exponent(tmp_path, trace_path,
+                                                                 run_script, monkeypatch):
+    """What scripts/diagnose.py prints from a report whose numbers were not computed (JSON
+    null) and whose exponent profile is not bounded (the audit's single orbit): "n/a", never
+    ``None`` or a crash, and the exponent the equations use (1.5, fixed), never the free
+    fit's edge value 1.00 as if measured."""
+    import afmlearn.diagnose.report as report
+
+    equation = "x'' + 0.002257 x' + 1 x = ...;  F_ts = - 2.772e-05 z^-2 + 5.195 delta^1.5"
+    model = {"equation": equation, "heldout_nrmse": None,
+             "parameters": {"contact_exponent": 1.5}}
+    rec = {"cause": "none", "confidence": 1.0, "gain": None,
+           "causes": [{"cause": "viscoelastic", "gain": None},
+                      {"cause": "long_range_damping", "gain": 0.2}],
+           "baseline": model, "extended": model, "warnings": [],
+           "contact_exponent": {"exponent": 1.0000000060705916, "interval_95": [1.0, 3.5],
+                                "bounded": False}}
+    monkeypatch.setattr(report, "diagnose_trace", lambda *a, **k: rec)
+    code, out, err = run_script("diagnose.py", f"trace={trace_path}",
+                                f"out_dir={tmp_path / 'o'}", "figures=false")
+    assert code == 0, err
+    assert "None" not in out and "n/a (not computed)" in out
+    line = next(ln for ln in out.splitlines() if ln.startswith("exponent"))
+    assert "1.5 (the sphere's), fixed in the equations" in line and "1.00-3.50" in line
+    assert not line.split()[1].startswith("1.00")
