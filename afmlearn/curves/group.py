@@ -41,7 +41,7 @@ from .fit import (
     _enc,
     wrap_phase,
 )
-from .hypotheses import BASELINE, DRIFT, Hypothesis, Parameter
+from .hypotheses import BASELINE, DRIFT, FREE_SCALE, Hypothesis, Parameter
 from .law import CurveLaw
 from .model import SlowFlowModel
 from .transfer import rescale_law
@@ -208,8 +208,9 @@ class GroupFitter:
         if self.fixed_law is None:
             self._base = CurveLaw(a0=self.a0_m / self.length_m_,
                                   radius=self.tip_radius_m / self.length_m_)
+            # the free-amplitude scale is a per-curve nuisance, held at 1 in joint fits
             self._shared: list[Parameter] = list(BASELINE.parameters) + [
-                p for p in hyp if p.field != DRIFT]
+                p for p in hyp if p.field not in (DRIFT, FREE_SCALE)]
         else:
             law, length = self.fixed_law
             self._base = rescale_law(law, float(length) / self.length_m_)

@@ -31,7 +31,7 @@ from .curve import Curve
 from .diagnose import CurveDiagnoser, equation, heldout_nrmse, name_cause
 from .fit import OFFSET, OMEGA
 from .group import GroupFitter, group_length
-from .hypotheses import DRIFT, EXTENSIONS, Hypothesis
+from .hypotheses import DRIFT, EXTENSIONS, FREE_SCALE, Hypothesis
 from .transfer import rescale_law
 
 __all__ = ["GroupDiagnoser", "curve_nrmse", "starts_from_singles"]
@@ -173,7 +173,9 @@ class GroupDiagnoser:
         for h in self.hypotheses:
             f = self.fits_[h.cause]
             chi2 = min(f.chi2_, b.chi2_)
-            k = sum(len(curves) if p.field == DRIFT else 1 for p in h.parameters)
+            # the free-amplitude scale is not fitted jointly (GroupFitter)
+            k = sum(len(curves) if p.field == DRIFT else 1 for p in h.parameters
+                    if p.field != FREE_SCALE)
             evidence = n * math.log(b.chi2_ / max(chi2, 1e-300)) - k * math.log(n)
             # an extension that fits no better than the baseline is the baseline (it nests it)
             e_ret = retraction_nrmse(f) if f.chi2_ < b.chi2_ else b_ret

@@ -12,16 +12,24 @@ import math
 from dataclasses import dataclass, replace
 from typing import final
 
-__all__ = ["Parameter", "Hypothesis", "BASELINE", "EXTENSIONS", "DRIFT", "FAR_OFF", "FAR_DECAY_M"]
+__all__ = ["Parameter", "Hypothesis", "BASELINE", "EXTENSIONS", "DRIFT", "FREE_SCALE",
+           "FAR_OFF", "FAR_DECAY_M", "FAR_DECAY_LOW_M"]
 
 #: pseudo-field of the drift rate of the rest gap (not a law term)
 DRIFT = "drift"
+#: pseudo-field of the free-amplitude scale: the amplitude far beyond the ramp (the drive's
+#: steady state without the sample) / the curve's free amplitude (measured at the ramp's far
+#: end, the length unit). 1 unless fitted; > 1 when a loss has not vanished at the ramp's start
+FREE_SCALE = "free_scale"
 #: start of the far-field damping coefficient that leaves it practically off (a thousandth of
 #: a typical lever's own damping 1/Q ~ 5e-3)
 FAR_OFF = 1e-7
 #: start of the far-field damping's decay length [m]: a physical length (squeeze film, long-range
 #: air damping), the same at every free amplitude of one lever
 FAR_DECAY_M = 500e-9
+#: lower bound of the far-field decay length [m] (50 nm in session 5 sent the strong synthetic
+#: damping case of test_fit, a 40 nm decay, to a refuted fit beside the truth; session 6)
+FAR_DECAY_LOW_M = 20e-9
 
 
 @final
@@ -85,16 +93,22 @@ EXTENSIONS: tuple[Hypothesis, ...] = (
     # the start; the Asylum curves show both (A, s4). The far decay is a physical length, not
     # a multiple of the free amplitude: it starts at FAR_DECAY_M (the Asylum lever's far law
     # decays over 440-500 nm at free amplitudes 22-55 nm; a start at 20 free amplitudes,
-    # 1.6-3.4 um at 82-172 nm, left the term off there), bounds 50 nm to 20 um. The far
-    # coefficient is in units of k / omega0, which the free amplitude does not scale either
+    # 1.6-3.4 um at 82-172 nm, left the term off there), bounds 20 nm to 20 um. The far
+    # coefficient is in units of k / omega0, which the free amplitude does not scale either.
+    # A far loss whose decay is longer than the ramp has not vanished at the ramp's start,
+    # where the free amplitude (the length unit) is measured: the free-amplitude scale
+    # (FREE_SCALE, the drive's free amplitude / that one) lets the fit see it (session 6: with
+    # the scale held at 1 the loss had to vanish within the ~1.1 um Asylum ramp, and the
+    # fitted decay, ~500 nm, was set by the ramp)
     Hypothesis("long_range_damping", (Parameter("damping", 1e-3, 1e-7, 1e1,
                                                 alternatives=(1e-2,)),
                                       Parameter("decay_length", 0.1, 1e-3, 3.0,
                                                 alternatives=(0.03, 0.5)),
                                       Parameter("far_damping", FAR_OFF, 1e-8, 1e-1,
                                                 alternatives=(3e-4,)),
-                                      Parameter("far_decay_length", FAR_DECAY_M, 50e-9,
-                                                20e-6, si_length=True))),
+                                      Parameter("far_decay_length", FAR_DECAY_M,
+                                                FAR_DECAY_LOW_M, 20e-6, si_length=True),
+                                      Parameter(FREE_SCALE, 1.0, 0.9, 3.0, log=False))),
     # the tail trades against the attraction: starts up to 100x the usual vdW scale, each
     # with the baseline's attraction rescaled (fit.RESCALES)
     Hypothesis("electrostatic", (Parameter("electrostatic", 1e-4, 1e-9, 1e0,

@@ -29,7 +29,7 @@ def test_folder_batch_on_real_curves(tmp_path):
         (folder / f).symlink_to(DATA / f)
     out = tmp_path / "out"
     proc = subprocess.run([sys.executable, str(SCRIPT), f"trace={folder}", f"out_dir={out}",
-                           "+diagnoser.max_evaluations=400", "time_limit_s=600"],
+                           "diagnoser.max_evaluations=400", "time_limit_s=600"],
                           cwd=tmp_path, capture_output=True, text=True, timeout=1800)
     assert proc.returncode == 0, proc.stderr[-2000:]
     summary = json.loads((out / "summary.json").read_text())
