@@ -4,13 +4,13 @@
     q2'' + D2 q2' + K2 q2 = g2 (B cos(Omega tau - phi) - F)          (if two modes)
     x = q1 + q2,  z = gap - x,  y = x + b2 x^2 + b3 x^3
 
-``F = sum_j c_j theta_j(z, z') + attached * n0 (z - a0) / d_c`` for ``a0 < z``, where
-``attached`` switches on at ``z <= a0`` and off at ``z > a0 + d_c``. The model is a
-:class:`simulator.forces.ForceLaw` (the library's terms plus a ``NECK`` term) integrated by
-:func:`simulator.integrate._kernel.integrate_one` with located switches, library terms gated on
-``z <= a0`` at every stage (``geometric``) and no graded steps (the one-period map stays smooth,
-as Newton shooting needs). Checked against :func:`simulate_reference` (plain Python) in the
-tests.
+``F = sum_j c_j theta_j(z, z', attached)``: the library's terms and, with a neck, the JKR neck's
+terms (:class:`~afmlearn.diagnose.spec.AbstractNeck`), gated on ``attached``, which switches on
+at ``z <= a0`` and off at ``z > a0 + d_c``. The model is a :class:`simulator.forces.ForceLaw`
+integrated by :func:`simulator.integrate._kernel.integrate_one` with located switches, library
+terms gated on ``z <= a0`` at every stage (``geometric``) and no graded steps (the one-period
+map stays smooth, as Newton shooting needs). Checked against :func:`simulate_reference` (plain
+Python) in the tests.
 """
 
 from __future__ import annotations
@@ -20,48 +20,43 @@ import math
 import numba as nb
 import numpy as np
 
-from simulator.forces.law import Kind
+from simulator.forces._kernel import jkr_contact_radius_sqrt
 from simulator.integrate._kernel import CONTACT, FREE, N_WORK, NECK, integrate_one
 
-__all__ = ["simulate_model", "simulate_reference"]
+__all__ = ["simulate_model", "simulate_reference", "jkr_radius_sqrt"]
 
-_NECK = Kind.NECK
 #: a run whose modal deflection exceeds this (units of L_ref) has blown up
 BLOWUP = 1e6
+
+
+@nb.njit(cache=True)
+def jkr_radius_sqrt(delta: np.ndarray, r_j: float, c_j: float) -> np.ndarray:
+    """``s = sqrt(a)`` of the JKR contact radius at each indentation ``delta`` (shape (n,)):
+    the simulator's own solve (:func:`simulator.forces._kernel.jkr_contact_radius_sqrt`,
+    stable branch, held at the neck limit ``s_m`` below ``delta_c``) over an array."""
+    out = np.empty(delta.shape[0])
+    for i in range(delta.shape[0]):
+        out[i] = jkr_contact_radius_sqrt(delta[i], r_j, c_j)
+    return out
 
 
 @nb.njit(cache=True)
 def simulate_model(state0: np.ndarray, attached0: bool, tau0: float, dtau: float,
                    n_samples: int, substeps: int, lever: np.ndarray, kinds: np.ndarray,
                    p1: np.ndarray, p2: np.ndarray, coefs: np.ndarray, a0: float,
-                   neck: np.ndarray, dc: float) -> tuple[np.ndarray, np.ndarray, bool]:
+                   dc: float) -> tuple[np.ndarray, np.ndarray, bool]:
     """Total deflection ``x`` and rate at ``tau0 + i dtau``, shape (2, n_samples); NaN on blow-up.
 
     ``state0 = [q1, q1', q2, q2']``; ``lever = [gap, K, D, B, phi, Omega, K2, D2, g2,
-    two_modes]``; ``kinds, p1, p2, coefs`` the library's terms, ``neck = [n0]`` and ``dc`` the
-    neck. Also returns the state and neck flag after the last sample's step (to continue a
-    run). Switches of the force (contact onset ``z = a0``, neck snap ``z = a0 + d_c``) are
-    located within each step. With one mode, ``q2`` (an offset of the gap) and ``q2'`` are
-    carried unchanged.
+    two_modes]``; ``kinds, p1, p2, coefs`` the force law's terms (library terms, then the
+    neck's), ``dc`` the neck's break distance past ``a0`` (0: no neck). Also returns the state
+    and neck flag after the last sample's step (to continue a run). Switches of the force
+    (contact onset ``z = a0``, neck snap ``z = a0 + d_c``) are located within each step. With
+    one mode, ``q2`` (an offset of the gap) and ``q2'`` are carried unchanged.
     """
     two = lever[9] > 0.5
     m = 2 if two else 1
-    n_lib = kinds.shape[0]
-    with_neck = dc > 0.0 and neck[0] != 0.0
-    n_t = n_lib + 1 if with_neck else n_lib
-    k_t = np.empty(n_t, np.int64)
-    p1_t = np.empty(n_t)
-    p2_t = np.empty(n_t)
-    c_t = np.empty(n_t)
-    k_t[:n_lib] = kinds
-    p1_t[:n_lib] = p1
-    p2_t[:n_lib] = p2
-    c_t[:n_lib] = coefs
-    if with_neck:
-        k_t[n_lib] = _NECK
-        p1_t[n_lib] = dc
-        p2_t[n_lib] = 0.0
-        c_t[n_lib] = neck[0]
+    with_neck = dc > 0.0
     hdr = np.array([a0, 1.0, dc if with_neck else 0.0, 1.0])
     B = lever[3]
     K = np.array([lever[1], lever[6]])[:m]
@@ -80,7 +75,7 @@ def simulate_model(state0: np.ndarray, attached0: bool, tau0: float, dtau: float
     f_out = np.empty(n_samples)
     c_out = np.empty(n_samples, np.int8)
     r = integrate_one(q, v, np.zeros(N_WORK), r, lever[5] * tau0 - lever[4], lever[5], drive,
-                      np.zeros(m), 0.0, gap, 0.0, K, D, D, S, k_t, p1_t, p2_t, c_t, hdr,
+                      np.zeros(m), 0.0, gap, 0.0, K, D, D, S, kinds, p1, p2, coefs, hdr,
                       dtau, n_samples, substeps, True, True, False,
                       BLOWUP, q_out, v_out, f_out, c_out, True)
     out = np.empty((2, n_samples))

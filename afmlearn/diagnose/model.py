@@ -103,7 +103,8 @@ class DiagnosisModel:
 
     def kernel_args(self) -> tuple:
         """The model's arguments of :func:`._kernel.simulate_model` after ``n_samples,
-        substeps``: lever vector, term encoding, coefficients, ``a0``, neck, ``d_c``."""
+        substeps``: lever vector, term encoding (library terms, then the neck's terms times its
+        coefficient), ``a0``, ``d_c`` (0 without a neck or with its coefficient 0)."""
         s = self.spec
         kinds, p1, p2 = s.library().encode()
         n_lib = kinds.size
@@ -112,9 +113,17 @@ class DiagnosisModel:
         k2, d2, g2 = mode.modal() if mode is not None else (0.0, 0.0, 0.0)
         lever = np.array([self.gap, self.coef[0], self.coef[1], self.coef[2], s.drive_phase,
                           self.omega, k2, d2, g2, float(mode is not None)])
-        neck = np.array([c[n_lib]], float) if s.neck is not None else np.zeros(1)
-        dc = s.neck.neck_length() if s.neck is not None else 0.0
-        return (lever, kinds, p1, p2, np.ascontiguousarray(c[:n_lib]), float(s.a0), neck,
+        coefs = np.asarray(c[:n_lib], float)
+        dc = 0.0
+        if s.neck is not None and c[n_lib] != 0.0:
+            nk, n1, n2, w = s.neck.encode(s.a0)
+            kinds = np.concatenate([kinds, nk])
+            p1 = np.concatenate([p1, n1])
+            p2 = np.concatenate([p2, n2])
+            coefs = np.concatenate([coefs, float(c[n_lib]) * w])
+            dc = s.neck.neck_length()
+        return (lever, np.ascontiguousarray(kinds, np.int64), np.ascontiguousarray(p1, float),
+                np.ascontiguousarray(p2, float), np.ascontiguousarray(coefs), float(s.a0),
                 float(dc))
 
     def simulate(self, state0: FloatArray, *, attached0: bool, tau0: float, dtau: float,

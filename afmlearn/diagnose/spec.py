@@ -12,9 +12,11 @@ hook:
 
 - :class:`AbstractForceTerm`, hook ``term()``: one more history-free force column, a library
   term (its values, sign constraint, name and kernel encoding);
-- :class:`AbstractNeck`, hook ``neck_length()``: the kernel's one history-dependent law --
-  after contact (``z <= a0``) a neck pulls ``n (z - a0)/d_c`` (``n <= 0``) until it breaks at
-  ``z > a0 + d_c``; its state is the attachment along the orbit;
+- :class:`AbstractNeck`, hook ``contact_constants()``: the kernel's one history-dependent
+  law -- the simulator's hysteretic JKR contact (:class:`simulator.forces.HystereticJKR`):
+  attached from contact (``z <= a0``) until the neck breaks at its stability limit
+  ``z = a0 + d_c``, one column ``alpha (a^3 - 1.5 r_j c_j a^1.5 + ..)`` (``alpha >= 0``); its
+  state is the attachment along the orbit;
 - :class:`AbstractExtraMode`, hook ``mode_parameters()``: a second lever mode sharing the tip
   force and drive (``f2/f0``, ``Q2``, gain ``g2``);
 - :class:`AbstractOutputMap`, hook ``polynomial()``: the detector, measured
@@ -46,6 +48,9 @@ from numpy.typing import NDArray
 from afmlearn.identify.library import AFMLibrary, Indentation, InversePower, TermInput
 from afmlearn.identify.library.base import AbstractTerm
 from simulator import Scales
+from simulator.forces.law import Kind
+
+from ._kernel import jkr_radius_sqrt
 
 __all__ = ["ModelSpec", "FORCE_TERM_ORDER", "AbstractExtension", "AbstractForceTerm",
            "AbstractNeck", "AbstractExtraMode", "AbstractOutputMap", "neck_state",
@@ -90,15 +95,38 @@ class AbstractForceTerm(AbstractExtension):
 
 
 class AbstractNeck(AbstractExtension):
-    """The kernel's history-dependent law (``Kind.NECK``): attached from ``z <= a0`` until
-    ``z > a0 + d_c``; while attached and out of contact it adds the column ``(z - a0)/d_c``
-    with a coefficient ``<= 0`` (a pull, zero where contact forms, largest at the snap)."""
+    """The kernel's history-dependent law: the simulator's hysteretic JKR contact.
+
+    With JKR constants ``r_j`` (tip radius / L_ref) and ``c_j`` (``sqrt(2 pi w / (E* L_ref))``)
+    the contact radius ``a = s**2`` solves ``delta = s**4 / r_j - c_j s`` (``delta = a0 - z``)
+    and the JKR force is ``alpha s**6 - beta s**3`` with ``beta = 1.5 r_j c_j alpha``
+    (:class:`simulator.forces.HystereticJKR`, whose terms ``JKR_CUBE``, ``JKR_THREE_HALVES``
+    the kernel integrates). The tip attaches at ``z <= a0`` and the neck breaks at its
+    stability limit ``z = a0 + d_c``, ``d_c = 0.75 c_j s_m``, ``s_m = (c_j r_j / 4)**(1/3)``.
+
+    The neck adds ONE column with a coefficient ``alpha >= 0`` (the JKR stiffness)::
+
+        theta = [attached] (s**6 - 1.5 r_j c_j s**3 + 0.5 (r_j c_j)**2 (a0 / max(z, a0))**2)
+
+    The last part cancels, while attached, the baseline's van der Waals term at the
+    coefficient JKR continuity gives it (the tail meets the JKR force where contact forms,
+    ``F(delta = 0) = -0.5 alpha (r_j c_j)**2``, as in the simulator): with ``alpha = 0`` the
+    model is the baseline (nested), and ``c_vdw = -0.5 alpha (r_j c_j)**2 a0**2``,
+    ``c_contact = 0`` is the simulator's hysteretic JKR law exactly. The column is zero where
+    contact forms (``s**3 = r_j c_j``), so the force stays continuous there.
+    """
 
     _rank = 1
 
     @abc.abstractmethod
+    def contact_constants(self) -> tuple[float, float]:
+        """``(r_j, c_j)``, both > 0 (dimensionless JKR radius and adhesion constants)."""
+
+    @final
     def neck_length(self) -> float:
-        """``d_c`` / L_ref (> 0): how far past contact the neck holds."""
+        """``d_c`` / L_ref: how far past contact the neck holds (its stability limit)."""
+        r_j, c_j = self.contact_constants()
+        return 0.75 * c_j * (c_j * r_j / 4.0) ** (1.0 / 3.0)
 
     @final
     def state(self, z: FloatArray, a0: float) -> NDArray[np.bool_]:
@@ -107,8 +135,31 @@ class AbstractNeck(AbstractExtension):
 
     @final
     def column(self, z: FloatArray, attached: NDArray[np.bool_], a0: float) -> FloatArray:
-        """``(z - a0)/d_c`` where attached and ``z > a0``, else 0; shape (n,)."""
-        return np.where(attached & (z > a0), (z - a0) / self.neck_length(), 0.0)
+        """The neck's column (class docstring) on gaps ``z`` with attachment ``attached``
+        (both shape (n,)); zero where not attached."""
+        r_j, c_j = self.contact_constants()
+        z = np.asarray(z, float)
+        out = np.zeros(z.shape)
+        att = np.asarray(attached, bool)
+        if att.any():
+            s3 = jkr_radius_sqrt(np.ascontiguousarray(a0 - z[att]), r_j, c_j) ** 3
+            rc = r_j * c_j
+            out[att] = s3 * s3 - 1.5 * rc * s3 + 0.5 * rc**2 * (a0 / np.maximum(z[att], a0)) ** 2
+        return out
+
+    @final
+    def encode(self, a0: float) -> tuple[NDArray[np.int64], FloatArray, FloatArray, FloatArray]:
+        """The column as :class:`simulator.forces.ForceLaw` terms ``(kinds, p1, p2, weights)``
+        (each shape (4,)); the kernel's coefficients are ``alpha * weights``. The tail part
+        is ``INVERSE_POWER - DETACHED_POWER`` (``max(z, a0)**-2`` while attached, else 0)."""
+        r_j, c_j = self.contact_constants()
+        rc = r_j * c_j
+        tail = 0.5 * rc**2 * a0**2
+        kinds = np.array([Kind.JKR_CUBE, Kind.JKR_THREE_HALVES, Kind.INVERSE_POWER,
+                          Kind.DETACHED_POWER], np.int64)
+        p1 = np.array([r_j, r_j, 2.0, 2.0])
+        p2 = np.array([c_j, c_j, 0.0, 0.0])
+        return kinds, p1, p2, np.array([1.0, -1.5 * rc, tail, -tail])
 
 
 class AbstractExtraMode(AbstractExtension):
@@ -281,7 +332,7 @@ class ModelSpec:
         """Sign constraint of each force coefficient (+1 >= 0, -1 <= 0, 0 free)."""
         out = [int(t.sign) for t in self.library().terms]
         if self.neck is not None:
-            out += [-1]
+            out += [1]
         return out
 
     def state(self, z: FloatArray) -> NDArray[np.bool_]:

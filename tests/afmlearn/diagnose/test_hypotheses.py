@@ -68,7 +68,7 @@ def test_spec_holds_one_extension_per_key_ordered_by_role():
     spec = spec.with_extension(ElectrostaticTerm(0.5)).with_extension(ViscoelasticTerm(0.5))
     assert [e.key for e in spec.extensions] == ["visco", "electrostatic", "neck", "detector"]
     assert spec.term_keys() == ["vdw", "contact", "visco", "electrostatic", "neck"]
-    assert spec.signs() == [-1, 1, 1, -1, -1]
+    assert spec.signs() == [-1, 1, 1, -1, 1]   # the JKR neck's stiffness is >= 0
     assert spec.state_key == ("neck", "detector")
     moved = spec.with_extension(ElectrostaticTerm(0.7))
     assert moved.get(ElectrostaticTerm).radius == 0.7 and moved.term_keys() == spec.term_keys()

@@ -28,7 +28,7 @@ def _model(*extensions) -> DiagnosisModel:
     if s.get(ViscoelasticTerm) is not None:
         coef[5] = 0.2
     if s.neck is not None:
-        coef[-1] = -0.4
+        coef[-1] = 0.4
     return DiagnosisModel(spec=s, coef=coef, omega=1.0, gap=1.0, scales=SCALES)
 
 
@@ -73,8 +73,11 @@ def test_conservative_orbit_balances_drive_and_damping():
 
 
 def test_neck_loss_is_the_loop_area_and_converges_with_the_step():
-    """The neck takes n0 d_c / 2 per cycle (the ramp's triangle); switches are located, so the
-    orbit does not depend on the step count (a fixed step would make it first order)."""
+    """The JKR neck takes the area between its pull and the tail per cycle; switches are
+    located, so the orbit converges with the step count (a fixed step through a switch would
+    make it first order). The JKR force is ``F_c + C sqrt(delta - delta_c)`` at the neck's
+    stability limit (unbounded stiffness, steps not graded here), which caps the order at
+    ~1.5 (measured: 1.9e-5, 2.7e-6, 4.3e-7 at 256, 1024, 4096 steps against 16384)."""
     m = _model(Neck(0.05))
     orbits = []
     s0 = _settled(m)
@@ -82,10 +85,13 @@ def test_neck_loss_is_the_loop_area_and_converges_with_the_step():
         x, v, ok = periodic_orbit(m, s0, False, n_out=n)
         assert ok
         orbits.append(np.fft.rfft(x)[:8] / n)
-    assert np.max(np.abs(orbits[0] - orbits[2])) < 1e-6
-    assert np.max(np.abs(orbits[1] - orbits[2])) < 1e-7
+    assert np.max(np.abs(orbits[0] - orbits[2])) < 3e-5
+    assert np.max(np.abs(orbits[1] - orbits[2])) < 4e-6
     # energy into the sample = drive input - damping (one period, fine grid)
     tau = np.arange(x.size) * 2 * math.pi / x.size
     drive = m.coef[2] * np.cos(tau - m.spec.drive_phase)
     e_ts = np.mean(drive * v - m.coef[1] * v**2) * 2 * math.pi
-    assert e_ts == pytest.approx(0.4 * 0.05 / 2, rel=2e-3)
+    a0, dc = m.spec.a0, m.spec.neck.neck_length()
+    zq = np.linspace(a0, a0 + dc, 20001)
+    area = -0.4 * np.trapezoid(m.spec.neck.column(zq, np.ones(zq.size, bool), a0), zq)
+    assert area > 0 and e_ts == pytest.approx(area, rel=2e-3)
