@@ -197,19 +197,27 @@ _SPREAD = (("adhesion, named model [nN]", "vdw", None),
            ("contact stiffness, baseline [nN/nm^1.5]", "stiffness", None),
            ("long-range damping [N s/m]", "damping", "long_range_damping"),
            ("damping decay length [nm]", "decay_length", "long_range_damping"),
+           ("far-field damping [N s/m]", "far_damping", "long_range_damping"),
+           ("far-field decay length [nm]", "far_decay_length", "long_range_damping"),
+           ("free-amplitude scale (drive's / ramp start's)", "free_scale", "long_range_damping"),
            ("adhesion neck length [nm]", "neck", "adhesion_hysteresis"),
            ("viscoelastic coefficient [N s/m^1.5]", "visco", "viscoelastic"))
 
 
-def _parameter_flag(field: str, value: float) -> str | None:
+def _parameter_flag(field: str, value: float, length_m: float | None = None) -> str | None:
     """``"bound"`` when a fitted law parameter sits at its bound (within 2 % in log),
     ``"start"`` when it never left a starting value: an extension's start or a start-grid
     value (a number of at most two significant digits, which a least-squares step does not
-    land on), else None."""
+    land on), else None. Parameters given in metres (the far-field decay) are compared in
+    units of ``length_m`` [m] (the curve's free amplitude; None: not compared)."""
     for hyp in (BASELINE, *EXTENSIONS):
         for p in hyp.parameters:
             if p.field != field:
                 continue
+            if p.si_length:
+                if length_m is None:
+                    continue
+                p = p.in_units(length_m)
             if p.log and value > 0 and min(abs(math.log(value / p.low)),
                                            abs(math.log(value / p.high))) < 0.02:
                 return "bound"
@@ -245,13 +253,14 @@ def _si_parameters(row: dict) -> dict[str, tuple[float, str | None]]:
              "stiffness": k * lu * 1e9 / (lu * 1e9) ** 1.5,       # nN / nm^1.5
              "damping": k / w0,                                    # N s / m
              "decay_length": lu * 1e9, "neck": lu * 1e9,           # nm
+             "far_damping": k / w0, "far_decay_length": lu * 1e9, "free_scale": 1.0,
              "visco": k / (w0 * math.sqrt(lu))}                    # N s / m^1.5
     for label, field, cause in _SPREAD:
         src = base if field == "stiffness" else ext
         if (cause is not None and row["cause"] != cause) or field not in src:
             continue
         v = float(src[field])
-        flag = _parameter_flag(field, v)
+        flag = _parameter_flag(field, v, lu)
         if field == "vdw" and flag is None:
             # the adhesion is the force at contact: not identified when the named model's
             # contact stiffness is not (the model's tip never reached the contact)
@@ -290,9 +299,11 @@ def plot_parameter_spread(rows: list[dict], out_dir: Path) -> Path:
     keys = ["free amplitude [nm]", "held-out gain", *(lab for lab, _, _ in _SPREAD)]
     table = spread_table(rows)
     groups = sorted({r.get("group", "") for r in rows})
-    fig = Figure(figsize=(13.0, 6.5))
-    axes = fig.subplots(2, 4).ravel()
-    for ax, key in zip(axes, keys, strict=True):
+    fig = Figure(figsize=(13.0, 9.5))
+    axes = fig.subplots(3, 4).ravel()
+    for ax in axes[len(keys):]:
+        ax.set_visible(False)
+    for ax, key in zip(axes, keys, strict=False):
         ax.set_xlabel(key, fontsize=8)
         ax.set_ylabel("curves")
         data, flags = table.get(key, ({g: np.empty(0) for g in groups}, {}))

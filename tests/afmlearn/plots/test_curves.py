@@ -145,3 +145,17 @@ def test_parameter_spread_leaves_out_unidentified_values(tmp_path):
     assert table["free amplitude [nm]"][0]["On"].size == 3
     path = plot_parameter_spread(rows, tmp_path)
     assert path.name == "parameter_spread.png" and path.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_far_field_terms_are_shown_with_their_flags_in_the_curves_unit():
+    """The far decay's start and bounds are metres (``si_length``): compared in the curve's
+    unit; the far term and the free-amplitude scale get panels in SI."""
+    far = {"far_damping": 1.234e-4, "far_decay_length": 2317e-9 / A_FREE,
+           "free_scale": 1.0853}
+    si = _si_parameters(_row("long_range_damping", damping=2.3e-3, decay_length=0.73, **far))
+    assert si["far-field decay length [nm]"] == (pytest.approx(2317.0, rel=1e-12), None)
+    assert si["far-field damping [N s/m]"][0] == pytest.approx(1.234e-4 * K / (2 * math.pi * F0))
+    assert si["free-amplitude scale (drive's / ramp start's)"] == (1.0853, None)
+    assert _parameter_flag("far_decay_length", 500e-9 / A_FREE, A_FREE) == "start"
+    assert _parameter_flag("far_decay_length", 20e-9 / A_FREE, A_FREE) == "bound"
+    assert _parameter_flag("free_scale", 1.0) == "start"
