@@ -22,9 +22,17 @@ one steady record is an experiment of one):
    evidence is named (:func:`name_cause`), the model is extended with it, and the remaining
    causes are tested against the *extended* model; the search stops when none is
    significant.
-5. **Report**: ``cause_`` is the first cause, ``causes_`` every step (each with the gain it
-   adds), ``extended_`` the model with all of them, ``gain_`` its held-out gain over the
-   baseline, and per observation the held-out NRMSE of both (``observations_``).
+5. **Backward check** (set-point series, two or more causes named): every named cause, the
+   last added first, is removed from the final model, which is refitted without it; a cause
+   whose removal does not raise chi2 above its own threshold, or whose held-out gain in the
+   final model is not above ``min_gain``, is dropped (:func:`backward_eliminate`), until a
+   pass drops nothing. A step can win by the better basin its refit of the shared parameters
+   found, not by its own term (measured on the demo's strong-damping series: the neck named
+   second with its coefficient ~1e-16 in the final model).
+6. **Report**: ``cause_`` is the first cause kept, ``causes_`` every step kept (each with the
+   gain it added), ``dropped_causes_`` the ones the backward check removed, ``extended_`` the
+   model with the kept ones, ``gain_`` its held-out gain over the baseline, and per
+   observation the held-out NRMSE of both (``observations_``).
 """
 
 from __future__ import annotations
@@ -35,7 +43,7 @@ import logging
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from typing import Any, Literal, final
@@ -77,7 +85,8 @@ from .output_error import OutputError
 logger = logging.getLogger(__name__)
 
 __all__ = ["Diagnoser", "NullCalibration", "Candidate", "Step", "HeldOut",
-           "ObservationResult", "name_cause", "null_kind", "tie_margin"]
+           "ObservationResult", "Removal", "backward_eliminate", "backward_keep", "name_cause",
+           "null_kind", "tie_margin"]
 
 FloatArray = NDArray[np.float64]
 
@@ -209,6 +218,31 @@ class Step:
     threshold: float
     confidence: float
     candidates: list[Candidate]
+    #: the backward check of this cause in the final model (None: not checked)
+    removal: Removal | None = None
+
+
+@final
+@dataclass(frozen=True)
+class Removal:
+    """The backward check of one named cause: the final model refitted without it.
+
+    ``chi2_rise``: output-error chi2 of that refit minus the final model's; ``threshold``:
+    the one the cause was named with (null threshold minus twice its prior log-odds);
+    ``gain``: its held-out gain in the final model, ``1 - NRMSE(final) / NRMSE(without it)``
+    (NaN: not computed, the chi2 rise already dropped it); ``reason``: why it was dropped
+    (empty: kept).
+    """
+
+    cause: str
+    chi2_rise: float
+    threshold: float
+    gain: float
+    reason: str
+
+    @property
+    def kept(self) -> bool:
+        return not self.reason
 
 
 @final
@@ -336,10 +370,15 @@ class Diagnoser:
         One per observation: denoised orbit, held-out span and predictions, both models at
         that observation, their held-out NRMSE.
     cause_ : str
-        The first cause named, or ``"none"``.
+        The first cause named and kept by the backward check, or ``"none"``.
     causes_ : list of Step
-        Every cause named, in order, each tested against the model extended by the ones
-        before it (empty for ``none``).
+        Every cause named and kept by the backward check, in order, each tested against the
+        model extended by the ones before it (empty for ``none``); ``Step.removal`` is its
+        backward check (None when not run: one cause named, or one record).
+    dropped_causes_ : list of Removal
+        Causes named step by step, then dropped by the backward check (in the order dropped).
+    backward_cpu_s_ : float
+        CPU time of the backward check [s] (0 when not run).
     candidates_ : list of Candidate
         The first step's candidates, one per hypothesis, in the order tested.
     baseline_, extended_ : DiagnosisModel
@@ -358,6 +397,8 @@ class Diagnoser:
     baseline_chi2_ : float
         Output-error chi-square of the baseline every first-step drop is measured against
         (after any re-basing, :meth:`_own_basin`).
+    extended_chi2_ : float
+        That of the final model (of the kept causes; the baseline's for ``none``).
     exponent_, exponent_interval_, exponent_bounded_ : float, (float, float), bool or None
         Contact exponent of the contact_geometry extension, its 95 % profile-likelihood
         interval and whether the data bound it (None when it was not tested).
@@ -562,6 +603,9 @@ class Diagnoser:
                 f"windows (see the warnings)")
             remaining = []
         steps: list[Step] = []
+        #: per step, the model it was tested against and what its extension changed
+        before: list[_Fit] = []
+        changes: list[tuple[frozenset[str], bool]] = []
         first: list[Candidate] | None = None
         conf0 = 1.0
         tested: dict[str, dict[str, Any]] = {}
@@ -599,6 +643,8 @@ class Diagnoser:
             steps.append(Step(cause=c.cause, gain=c.gain, evidence=c.evidence,
                               delta_chi2=c.delta_chi2, threshold=c.threshold, confidence=conf,
                               candidates=cands))
+            before.append(current)
+            changes.append(_change(current.sol.spec, fits[idx].sol.spec))
             current = fits[idx]
             remaining = [h for h in remaining if h.cause != c.cause]
             if remaining and k + 1 < self.max_causes and n_obs > 1:
@@ -609,6 +655,24 @@ class Diagnoser:
                 current.sol, _ = self._oe.refine(current.sol, current.build, current.params,
                                                  max_nfev=25)
                 current.warm = self._oe.snapshot()
+        self.dropped_causes_: list[Removal] = []
+        self.backward_cpu_s_ = 0.0
+        if len(steps) >= 2 and n_obs > 1:
+            # (one cause: its step-1 drop was already measured against the baseline refitted
+            # from its own point, _own_basin, which is this check with one refit)
+            c0 = time.process_time()
+            first_cause = steps[0].cause
+            current, steps = self._backward(steps, before, changes, current, base_fit, ctx,
+                                            calib)
+            self.backward_cpu_s_ = time.process_time() - c0
+            if not steps:
+                self.warnings_.append(
+                    f"every named cause was dropped by the backward check (none raises chi2 "
+                    f"above its threshold when removed from the final model): "
+                    f"{[d.cause for d in self.dropped_causes_]}; reported as none")
+                conf0 = _none_weight(first or [], calib.min_gain)
+            elif steps[0].cause != first_cause:
+                conf0 = steps[0].confidence
         self.candidates_ = first or []
         self.causes_ = steps
         self.cause_ = steps[0].cause if steps else "none"
@@ -619,6 +683,87 @@ class Diagnoser:
         self._log(f"causes {[s.cause for s in steps] or ['none']} (gain {self.gain_:.3f}) in "
                   f"{self.runtime_s_:.1f} s")
         return self
+
+    # ------------------------------------------------------------------ backward check
+    def _backward(self, steps: list[Step], before: list[_Fit],
+                  changes: list[tuple[frozenset[str], bool]], final: _Fit, base: _Fit,
+                  ctx: Context, calib: NullCalibration) -> tuple[_Fit, list[Step]]:
+        """Backward elimination (:func:`backward_eliminate`) of the named ``steps`` in the
+        final model ``final``: each removal is the final model without that cause's extension
+        (its other extensions' nonlinear values held), ``a0``, lever, drive, force
+        coefficients and phases refitted by output error from the final model's point and
+        orbits (``joint_nfev`` iterations, as a forward candidate); when the kept causes
+        without it are exactly the model an earlier step was tested against, that fit is a
+        second point of the reduced family and the better one counts. Returns the final model
+        of the kept causes and their steps (each with its :class:`Removal`); the dropped
+        ones go to ``dropped_causes_``."""
+        state = {"final": final, "stale": False}
+        pending: dict[int, _Fit] = {}
+        exponent0 = base.sol.spec.contact_exponent
+
+        def key(kept: Sequence[int]) -> str:
+            return "backward:" + ("+".join(steps[j].cause for j in kept) or "none")
+
+        def remove(i: int, kept: tuple[int, ...]) -> tuple[float, Callable[[], float]]:
+            fin: _Fit = state["final"]
+            rest = [j for j in kept if j != i]
+            keys, exponent = changes[i]
+            spec = fin.sol.spec.replace(
+                extensions=tuple(e for e in fin.sol.spec.extensions if e.key not in keys),
+                **({"contact_exponent": exponent0} if exponent else {}))
+            build, params = structure(None, spec, ctx)
+            coef = _restrict(spec, fin.sol.spec, fin.sol.coef)
+            start = dataclasses.replace(fin.sol, spec=spec, coef=coef, values=(spec.a0,))
+            if fin.warm is not None:
+                # shot from the final model's own orbits, also where the removal changes the
+                # state (a neck, a mode): the reduced structure's warm starts left by older
+                # fits may sit on the other branch (measured on the demo's damping series:
+                # the damping + neck model without its neck, coefficient 1.5e-21, refitted
+                # from them ended at chi2 > 3,198 against 336 with it)
+                self._oe.restore(_seeded(fin.warm, fin.sol.spec, spec))
+            sol, _ = self._oe.refine(start, build, params, max_nfev=self.joint_nfev)
+            red = _Fit(sol, fin.hb, build, params, key(rest), np.full(len(self._obs), np.nan),
+                       self._oe.snapshot())
+            msg = ""
+            if rest == list(range(len(rest))) and before[len(rest)].sol.chi2 < sol.chi2:
+                pre = before[len(rest)]
+                red = _Fit(pre.sol, pre.hb, pre.build, pre.params, key(rest),
+                           np.full(len(self._obs), np.nan), pre.warm)
+                msg = f"; the model step {len(rest) + 1} was tested against is lower"
+            pending[i] = red
+            rise = float(red.sol.chi2 - fin.sol.chi2)
+            self._log(f"  backward: without {steps[i].cause}: refit chi2 {sol.chi2:.2f}{msg} "
+                      f"(final {fin.sol.chi2:.2f}, rise {rise:.2f}, threshold "
+                      f"{steps[i].threshold:.2f})")
+
+            def gain() -> float:
+                if state["stale"]:
+                    fin.nrmse[:] = self._heldout(fin)
+                    state["stale"] = False
+                red.nrmse[:] = self._heldout(red)
+                g = 1.0 - _typical(fin.nrmse) / _typical(red.nrmse)
+                self._log(f"  backward: {steps[i].cause}: held-out gain in the final model "
+                          f"{g:+.3f}")
+                return float(g) if math.isfinite(g) else -math.inf
+
+            return rise, gain
+
+        def accept(i: int) -> None:
+            state["final"] = pending[i]
+            state["stale"] = bool(np.all(np.isnan(pending[i].nrmse)))
+
+        kept, dropped, last = backward_eliminate(
+            [s.cause for s in steps], [s.threshold for s in steps], calib.min_gain, remove,
+            accept)
+        for d in dropped:
+            self._log(f"  backward: dropped {d.cause}: {d.reason}")
+        self.dropped_causes_ = dropped
+        fin = state["final"]
+        if not kept:
+            return base, []
+        if state["stale"]:
+            fin.nrmse[:] = self._heldout(fin)
+        return fin, [dataclasses.replace(steps[j], removal=last[j]) for j in kept]
 
     # ------------------------------------------------------------------ pieces
     def _span(self, o: Observation, single: bool) -> tuple[int, int]:
@@ -990,6 +1135,7 @@ class Diagnoser:
         self.baseline_ = r.baseline
         self.extended_ = r.extended
         self.baseline_chi2_ = float(base.sol.chi2)
+        self.extended_chi2_ = float(final.sol.chi2) if named else float(base.sol.chi2)
         self.baseline_nrmse_ = _typical(base.nrmse)
         self.extended_nrmse_ = _typical(final.nrmse)
         self.gain_ = (1.0 - self.extended_nrmse_ / self.baseline_nrmse_
@@ -1070,6 +1216,53 @@ def null_kind(n_obs: int, n_groups: int, phase_recorded: bool
     return "series" if phase_recorded else "series_nophase"
 
 
+def _change(before: Any, after: Any) -> tuple[frozenset[str], bool]:
+    """What one step's extension changed in the model spec: the extension keys it added and
+    whether it moved the contact exponent (``contact_geometry``)."""
+    keys = frozenset(e.key for e in after.extensions) - {e.key for e in before.extensions}
+    return keys, bool(after.contact_exponent != before.contact_exponent)
+
+
+def _seeded(snapshot: tuple[dict, dict, list[float]], full: Any, spec: Any
+            ) -> tuple[dict, dict, list[float]]:
+    """An :meth:`OutputError.snapshot` whose warm starts for ``spec``'s state (its nested
+    structure, without a neck or a mode that ``full`` has) are ``full``'s orbit states: the
+    modal state ``[q1, q1', q2, q2']`` summed into the first mode when ``spec`` has no second
+    mode, not attached when it has no neck. Unchanged when the state is the same."""
+    warm, jac, phases = snapshot
+    old, new = full.state_key, spec.state_key
+    if old == new:
+        return snapshot
+    warm, jac = dict(warm), dict(jac)
+    merge = full.extra_mode is not None and spec.extra_mode is None
+    for (i, k), (state, attached) in list(warm.items()):
+        if k != old:
+            continue
+        s = np.array(state, float)
+        if merge:
+            s = np.array([s[0] + s[2], s[1] + s[3], 0.0, 0.0])
+        warm[(i, new)] = (s, bool(attached) and spec.neck is not None)
+        jac.pop((i, new), None)
+        if (i, old) in jac and not merge:
+            jac[(i, new)] = np.array(jac[(i, old)], float)
+    return warm, jac, list(phases)
+
+
+def _restrict(spec: Any, full: Any, coef: FloatArray) -> FloatArray:
+    """``coef`` of spec ``full`` restricted to its nested ``spec`` (the force coefficients of
+    the columns ``spec`` keeps, lever, drive and further drive amplitudes carried over; the
+    inverse of :meth:`~afmlearn.diagnose.spec.ModelSpec.embed`)."""
+    coef = np.asarray(coef, float)
+    extra = coef[3 + full.n_force:]
+    out = np.zeros(3 + spec.n_force + extra.size)
+    out[:3] = coef[:3]
+    out[3 + spec.n_force:] = extra
+    theirs = full.term_keys()
+    for j, k in enumerate(spec.term_keys()):
+        out[3 + j] = coef[3 + theirs.index(k)]
+    return out
+
+
 def _typical(a: FloatArray) -> float:
     """Median over the observations held out (NaN: not held out; inf: no prediction).
 
@@ -1125,13 +1318,92 @@ def name_cause(delta_chi2: list[float], gains: list[float], thresholds: list[flo
                 if (d - t)[idx] - (d - t)[j] <= margin and math.isfinite(h[j])]
         if len(tied) > 1:
             idx = min(tied, key=lambda j: h[j])
+    w = _weights(d, g, t, min_gain)
+    return idx, float(w[0 if idx is None else idx + 1])
+
+
+def _weights(d: FloatArray, g: FloatArray, t: FloatArray, min_gain: float) -> FloatArray:
+    """Softmax weights of ``none`` (first) and each candidate over the halved penalised
+    evidences (:func:`name_cause`'s confidence)."""
     # an extension whose fit-span evidence does not carry over to the held-out span is an
     # over-fit, not an alternative explanation: it does not dilute the confidence
     pen = np.where(g > min_gain, np.maximum(d - t, -50.0), -np.inf) / 2.0
     scores = np.concatenate([[0.0], pen])
     w = np.exp(scores - scores.max())
-    w /= w.sum()
-    return idx, float(w[0 if idx is None else idx + 1])
+    return w / w.sum()
+
+
+def _none_weight(cands: Sequence[Candidate], min_gain: float) -> float:
+    """The confidence of ``none`` among a step's candidates (:func:`_weights`)."""
+    if not cands:
+        return 1.0
+    d = np.array([c.delta_chi2 for c in cands], float)
+    g = np.array([c.gain for c in cands], float)
+    t = np.array([c.threshold for c in cands], float)
+    return float(_weights(d, g, t, min_gain)[0])
+
+
+def backward_keep(chi2_rise: float, threshold: float, gain: float, min_gain: float) -> str:
+    """The backward check's decision for one named cause: ``""`` (keep) or why it is dropped.
+
+    Dropped when removing it from the final model (the rest refitted) raises chi2 by no more
+    than ``threshold`` (the one it was named with), or when its held-out gain in the final
+    model is not above ``min_gain`` (NaN counts as not above). A NaN rise is no evidence.
+    """
+    if not chi2_rise > threshold:
+        return (f"chi2 rises by {chi2_rise:.1f} when it is removed from the final model, not "
+                f"above its threshold {threshold:.2f}")
+    if not gain > min_gain:
+        return (f"held-out gain {gain:+.3f} in the final model, not above {min_gain:g}")
+    return ""
+
+
+def backward_eliminate(causes: Sequence[str], thresholds: Sequence[float], min_gain: float,
+                       remove: Callable[[int, tuple[int, ...]], tuple[float,
+                                                                      Callable[[], float]]],
+                       accept: Callable[[int], None]) -> tuple[list[int], list[Removal],
+                                                              dict[int, Removal]]:
+    """Backward elimination of named causes (indices into ``causes``, in naming order).
+
+    The kept causes are checked the last named first. ``remove(i, kept)`` refits the current
+    final model (the kept causes ``kept``) without cause ``i`` and returns the chi2 rise and
+    a callable giving ``i``'s held-out gain in the final model (called only when the rise is
+    above the threshold: it costs refits without the held-out set-points). A dropped cause is
+    committed by ``accept(i)`` (the refit without it becomes the final model); every cause
+    kept so far is then checked again against the new final model, until every kept cause
+    has been checked against the current one (a pass that drops nothing).
+
+    Returns the kept indices (naming order), the dropped causes' records (in the order
+    dropped) and the last record of each kept one.
+    """
+    if len(causes) != len(thresholds):
+        raise ValueError(f"thresholds must have one value per cause ({len(causes)}), got "
+                         f"{len(thresholds)}")
+    kept = list(range(len(causes)))
+    version = 0
+    checked: dict[int, int] = {}
+    last: dict[int, Removal] = {}
+    dropped: list[Removal] = []
+    while True:
+        todo = [i for i in reversed(kept) if checked.get(i) != version]
+        if not todo:
+            break
+        i = todo[0]
+        rise, gain_of = remove(i, tuple(kept))
+        gain = gain_of() if rise > thresholds[i] else math.nan
+        reason = backward_keep(rise, thresholds[i], gain, min_gain)
+        rec = Removal(cause=causes[i], chi2_rise=float(rise), threshold=float(thresholds[i]),
+                      gain=float(gain), reason=reason)
+        if reason:
+            accept(i)
+            kept.remove(i)
+            dropped.append(rec)
+            last.pop(i, None)
+            version += 1
+        else:
+            checked[i] = version
+            last[i] = rec
+    return kept, dropped, last
 
 
 def _free_harmonics(free_m: FloatArray, cal: Calibrated) -> dict[str, Any] | None:

@@ -8,7 +8,9 @@ temporary sibling + rename):
 
 ``report.json``
     design.md section 3 (``cause``, ``confidence``, ``baseline``, ``extended``, ``gain``,
-    ``candidates``, ``causes``, ``figures``) plus the held-out NRMSE per observation
+    ``candidates``, ``causes``, ``figures``; ``causes`` the ones the backward check kept)
+    plus ``dropped_causes`` (named step by step, then dropped: cause, chi2 rise on removal,
+    threshold, held-out gain, reason), the held-out NRMSE per observation
     (``observations``), the held-out design, the contact exponent's interval, provenance,
     calibration, energies, warnings, runtime.
 ``report.md``
@@ -32,7 +34,7 @@ from afmlearn.io import jsonable, read_trace, write_json
 from afmlearn.io._atomic import atomic_path
 from afmlearn.preprocess import checked_row
 
-from .diagnoser import Diagnoser
+from .diagnoser import Diagnoser, Removal
 from .hypotheses import default_hypotheses
 from .model import DiagnosisModel
 from .observation import read_experiment
@@ -144,8 +146,7 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
     hyps = {h.cause: h for h in (dg.hypotheses or default_hypotheses())}
     base_chi2 = (dg.candidates_[0].chi2 + dg.candidates_[0].delta_chi2
                  if dg.candidates_ else None)
-    final_chi2 = (next(c.chi2 for c in dg.causes_[-1].candidates
-                       if c.cause == dg.causes_[-1].cause) if dg.causes_ else base_chi2)
+    final_chi2 = dg.extended_chi2_ if dg.causes_ else base_chi2
     details = {c.cause: c.details for c in dg.candidates_}
     qrnn = details.get("higher_mode", {}).get("qrnn_coupling")
     length = cal.scales.length
@@ -169,7 +170,11 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
                        for c in dg.candidates_],
         "causes": [{"cause": s.cause, "gain": s.gain, "evidence": s.evidence,
                     "delta_chi2": s.delta_chi2, "threshold": s.threshold,
-                    "confidence": s.confidence} for s in dg.causes_],
+                    "confidence": s.confidence,
+                    "removal_chi2_rise": None if s.removal is None else s.removal.chi2_rise,
+                    "removal_gain": None if s.removal is None else s.removal.gain}
+                   for s in dg.causes_],
+        "dropped_causes": [_removal_record(d) for d in dg.dropped_causes_],
         "figures": figures,
         "format": REPORT_FORMAT,
         "afmlearn_version": afmlearn.__version__,
@@ -210,6 +215,11 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
     if qrnn is not None:
         rec["qrnn_coupling"] = qrnn
     return jsonable(rec)
+
+
+def _removal_record(d: Removal) -> dict[str, Any]:
+    return {"cause": d.cause, "chi2_rise": d.chi2_rise, "threshold": d.threshold,
+            "heldout_gain": d.gain, "reason": d.reason}
 
 
 def report_markdown(rec: dict[str, Any], figs: dict[str, Path]) -> str:
@@ -261,6 +271,19 @@ def report_markdown(rec: dict[str, Any], figs: dict[str, Path]) -> str:
         for k, c in enumerate(rec["causes"], 1):
             lines.append(f"| {k} | {c['cause']} | {c['delta_chi2']:.1f} | "
                          f"{c['threshold']:.1f} | {c['gain']:+.3f} |")
+        lines.append("")
+    dropped = rec.get("dropped_causes") or []
+    if dropped:
+        lines += ["## Dropped by the backward check", "",
+                  "Named step by step, then removed from the final model (the rest refitted "
+                  "without it): its removal did not raise chi2 above its threshold, or its "
+                  "held-out gain in the final model was not above "
+                  f"{rec['thresholds']['min_gain']:g}.", "",
+                  "| cause | chi2 rise on removal | threshold | held-out gain | reason |",
+                  "|---|---|---|---|---|"]
+        for d in dropped:
+            lines.append(f"| {d['cause']} | {d['chi2_rise']:.1f} | {d['threshold']:.1f} | "
+                         f"{_num(d['heldout_gain'], '+.3f')} | {d['reason']} |")
         lines.append("")
     ce = rec.get("contact_exponent")
     if ce:
