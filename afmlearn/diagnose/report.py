@@ -30,12 +30,14 @@ from pathlib import Path
 from typing import Any
 
 import afmlearn
+from afmlearn.identify.fixed_exponent import SPHERE_EXPONENT
 from afmlearn.io import jsonable, read_trace, write_json
 from afmlearn.io._atomic import atomic_path
 from afmlearn.preprocess import checked_row
 
 from .diagnoser import Diagnoser, Removal
 from .hypotheses import default_hypotheses
+from .hypotheses.contact_geometry import exponent_summary
 from .model import DiagnosisModel
 from .observation import read_experiment
 
@@ -287,10 +289,10 @@ def report_markdown(rec: dict[str, Any], figs: dict[str, Path]) -> str:
         lines.append("")
     ce = rec.get("contact_exponent")
     if ce:
-        lo, hi = ce["interval_95"]
-        lines += [f"Contact exponent {ce['exponent']:.2f}, 95 % profile-likelihood interval "
-                  f"[{lo:.2f}, {hi:.2f}]" + ("" if ce["bounded"] else
-                                            " -- the data do not bound it") + ".", ""]
+        # the exponent the equations use, never an unbounded free fit's edge value as if it
+        # were measured (issue 14 audit)
+        used = float(e.get("parameters", {}).get("contact_exponent", SPHERE_EXPONENT))
+        lines += [f"Contact exponent {exponent_summary(ce, used=used)}.", ""]
     if len(rec["observations"]) > 1:
         lines += ["## Held-out NRMSE per set-point", "",
                   "| observation | rest gap [nm] | baseline | extended |", "|---|---|---|---|"]
