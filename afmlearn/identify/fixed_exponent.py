@@ -26,11 +26,13 @@ is the profile's edge value.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, final
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
 from .library import AFMLibrary, Indentation
@@ -40,6 +42,8 @@ if TYPE_CHECKING:
     from .identifier import ForceIdentifier
 
 __all__ = ["SPHERE_EXPONENT", "FixedExponentLaw", "fixed_exponent_law"]
+
+FloatArray = NDArray[np.float64]
 
 #: the sphere's Hertz/DMT exponent: the baseline law's (physics.md section 2)
 SPHERE_EXPONENT = 1.5
@@ -63,6 +67,12 @@ class FixedExponentLaw:
         How ``model`` was obtained (empty without one).
     text : str
         One clause for the terminal and the report.
+    force : dict or None
+        ``model``'s force on the identifier's samples with its 95 % band, conditional on the
+        fixed exponent: ``force``, ``lo``, ``hi`` [k L_ref], each the shape of the
+        identifier's ``force_`` (NaN band where none); None without ``model``.
+    band : str
+        What the band is (the files' description).
     """
 
     exponent: float | None
@@ -70,6 +80,8 @@ class FixedExponentLaw:
     rise: float
     method: str
     text: str
+    force: dict[str, FloatArray] | None = None
+    band: str = ""
 
     def record(self) -> dict[str, Any]:
         """JSON-able content for result.json's ``exponent_fixed``."""
@@ -116,9 +128,9 @@ def fixed_exponent_law(ide: ForceIdentifier, *, exponent: float = SPHERE_EXPONEN
                   f"the sphere's {exponent:g} lies {side} it, so the equation keeps the fitted "
                   f"delta^{p:.6g}, a value at the profile's edge, not an identified exponent"))
     if ide.orbit_ is not None:
-        model, rise, method = _orbit_law(ide, float(p), exponent)
+        model, rise, method, force, band = _orbit_law(ide, float(p), exponent)
     else:
-        model, rise, method = _joint_law(ide, float(p), exponent)
+        model, rise, method, force, band = _joint_law(ide, float(p), exponent)
     own = ("the free fit also gave it" if abs(p - exponent) < 5e-3 else
            f"the free fit's {p:.2f} is one point of a flat valley")
     head = (f"interaction exponent {exponent:g} FIXED (sphere, Hertz/DMT): not identifiable "
@@ -130,7 +142,8 @@ def fixed_exponent_law(ide: ForceIdentifier, *, exponent: float = SPHERE_EXPONEN
         text = (head + f"; equation re-fitted at {exponent:g} ({method}"
                 + (f"; profile rise {rise:.2f}, 3.84 at 95 %" if _finite(rise) else "")
                 + ")")
-    return FixedExponentLaw(exponent=exponent, model=model, rise=rise, method=method, text=text)
+    return FixedExponentLaw(exponent=exponent, model=model, rise=rise, method=method, text=text,
+                            force=force if model is not None else None, band=band)
 
 
 # ---------------------------------------------------------------------------- refits
@@ -162,17 +175,23 @@ def _best_a0(cost: Any, lo: float, hi: float, hint: float, n: int = 10) -> float
     return best_a
 
 
-def _orbit_law(ide: ForceIdentifier, p: float, exponent: float
-               ) -> tuple[IdentifiedModel | None, float, str]:
-    """One orbit: ``a0`` profiled and every coefficient re-fitted at ``exponent``."""
+_Refit = tuple[IdentifiedModel | None, float, str, "dict[str, FloatArray] | None", str]
+_NONE: _Refit = (None, math.nan, "", None, "")
+
+
+def _orbit_law(ide: ForceIdentifier, p: float, exponent: float) -> _Refit:
+    """One orbit: ``a0`` profiled and every coefficient re-fitted at ``exponent``; its force
+    with the bagging band of that refit (the fitted law's kind of band)."""
+    from .joint import Bagging
     from .single import orbit_model
+    from .single_outputs import orbit_force
 
     res = ide.orbit_
     assert res is not None
     pb = res.problem
     j = _contact_index(res.library, p)
     if j is None:
-        return None, math.nan, ""
+        return _NONE
     lib = _with_exponent(res.library, j, exponent)
     lo, hi = pb.a0_range
     a0 = _best_a0(lambda a: pb.support_rss(lib, a), lo, hi, res.a0)
@@ -180,7 +199,7 @@ def _orbit_law(ide: ForceIdentifier, p: float, exponent: float
     try:
         coef = pb.refit(des, np.ones(des.theta.shape[1], bool))
     except (ValueError, np.linalg.LinAlgError):
-        return None, math.nan, ""
+        return _NONE
     r = des.y - des.theta @ coef
     rss = float(r @ r)
     rise = math.nan
@@ -188,14 +207,22 @@ def _orbit_law(ide: ForceIdentifier, p: float, exponent: float
     if prof is not None and np.isfinite(prof[:, 1]).any() and rss > 0:
         rise = float(des.y.size * math.log(rss / float(np.nanmin(prof[:, 1]))))
     model = orbit_model(pb, lib, a0, coef, info={"exponent_fixed": exponent})
-    return model, rise, "a0 and every coefficient, equation error"
+    samples = None
+    if ide.n_bootstrap:
+        samples = Bagging(n_bootstrap=ide.n_bootstrap, seed=ide.seed).run(
+            pb, des)  # type: ignore[arg-type]
+    fo = orbit_force(pb, model, lib, samples)
+    force = {k: fo[k] for k in ("force", "lo", "hi")}
+    return (model, rise, "a0 and every coefficient, equation error", force,
+            f"the bagged refits at the fixed exponent {exponent:g} (a0 held)")
 
 
-def _joint_law(ide: ForceIdentifier, p: float, exponent: float
-               ) -> tuple[IdentifiedModel | None, float, str]:
-    """Joint fit: the output-error profile's fit at ``exponent``, or an equation-error refit."""
-    from .joint import support_fit
-    from .joint_outputs import joint_model
+def _joint_law(ide: ForceIdentifier, p: float, exponent: float) -> _Refit:
+    """Joint fit: the output-error profile's fit at ``exponent`` with its Gauss--Newton band
+    (``a0`` and the coefficients), or an equation-error refit with its bootstrap band."""
+    from .force_band import conditional_band
+    from .joint import Bagging, support_fit
+    from .joint_outputs import joint_model, orbit_inputs
 
     res = ide.joint_
     assert res is not None
@@ -203,7 +230,7 @@ def _joint_law(ide: ForceIdentifier, p: float, exponent: float
     if res.output_error is not None:
         fit = (ex.get("fits") or {}).get(round(float(exponent), 6))
         if fit is None:
-            return None, math.nan, ""
+            return _NONE
         prof = np.asarray(ex["profile"], float)
         rise = math.nan
         i = np.flatnonzero(np.isclose(prof[:, 0], exponent))
@@ -211,19 +238,34 @@ def _joint_law(ide: ForceIdentifier, p: float, exponent: float
             rise = float((prof[i[0], 1] - np.nanmin(prof[:, 1])) / ex["dispersion"])
         model = joint_model(res, fit.coef(res.problem), fit.library, fit.a0,
                             info={"exponent_fixed": exponent, "joint": True})
-        return model, rise, "the output-error profile's fit at this exponent"
+        band = conditional_band(fit, orbit_inputs(res))
+        force = {k: np.stack(v) for k, v in band.items()}
+        return (model, rise, "the output-error profile's fit at this exponent", force,
+                f"Gauss-Newton band of the fit at the fixed exponent {exponent:g} (a0 and the "
+                "force coefficients, delta method)")
     j = _contact_index(res.library, p)
     if j is None:
-        return None, math.nan, ""
+        return _NONE
     lib = _with_exponent(res.library, j, exponent)
     pb = res.problem
     lo, hi = pb.a0_range
     a0 = _best_a0(lambda a: support_fit(pb, lib, a)[1], lo, hi, res.a0)
-    coef, rss, _ = support_fit(pb, lib, a0)
+    coef, rss, des = support_fit(pb, lib, a0)
     if not math.isfinite(rss):
-        return None, math.nan, ""
+        return _NONE
     model = joint_model(res, coef, lib, a0, info={"exponent_fixed": exponent, "joint": True})
-    return model, math.nan, "a0 and every coefficient, equation error"
+    samples = Bagging(n_bootstrap=ide.n_bootstrap, seed=ide.seed).run(pb, des)
+    ins = orbit_inputs(res)
+    th = [lib.evaluate(dataclasses.replace(t, a0=a0)) for t in ins]
+    f = np.stack([t @ coef[pb.n_lin:] for t in th])
+    if samples.shape[0] >= 5:
+        q = [np.percentile(samples[:, pb.n_lin:] @ t.T, [2.5, 97.5], axis=0) for t in th]
+        lo, hi = np.stack([a for a, _ in q]), np.stack([b for _, b in q])
+    else:
+        lo = hi = np.full_like(f, np.nan)
+    return (model, math.nan, "a0 and every coefficient, equation error",
+            {"force": f, "lo": lo, "hi": hi},
+            f"the bootstrap refits at the fixed exponent {exponent:g} (a0 held)")
 
 
 def _finite(v: Any) -> bool:

@@ -34,6 +34,7 @@ from afmlearn.preprocess import Calibrated, calibrate, check_trace
 
 from .constraints import CalibrationConstraints
 from .drive import AbstractDrivePhase
+from .fixed_exponent import fixed_exponent_law
 from .joint import (
     DEFAULT_OUTPUT_ERROR,
     Bagging,
@@ -156,7 +157,13 @@ class ForceIdentifier:
     a0_profile_ : ndarray, shape (n_a0, 2)
         ``(a0, objective)`` of the profile.
     force_, force_lo_, force_hi_ : ndarray, shape (n,)
-        Identified ``F_ts`` [k L_ref] on every sample and its 95 % band (NaN where undefined).
+        Identified ``F_ts`` [k L_ref] on every sample and its 95 % band (NaN where undefined;
+        a joint fit: shape (n_obs, n), the output-error band from the exponent's profile,
+        :mod:`afmlearn.identify.force_band`).
+    fixed_exponent_ : FixedExponentLaw or None
+        When the data do not bound the contact exponent: the law quoted at the sphere's 1.5
+        with its force and band on the same samples (:mod:`afmlearn.identify.fixed_exponent`);
+        None otherwise.
     state_x_, state_v_ : ndarray, shape (n,)
         Denoised deflection and rate used to evaluate the force.
     heldout_start_ : int
@@ -319,6 +326,7 @@ class ForceIdentifier:
         self.exponent_profile_ = None if res.exponent is None else res.exponent["profile"]
         self.summary_ = joint_summary(res, model, forces)
         self.drive_phase_candidates_ = []
+        self.fixed_exponent_ = fixed_exponent_law(self)
         return self
 
     # ------------------------------------------------------------------ fit
@@ -427,6 +435,7 @@ class ForceIdentifier:
         self.state_x_, self.state_v_ = forces["x"], forces["v"]
         self.summary_ = summary
         self.exponent_profile_ = expo
+        self.fixed_exponent_ = fixed_exponent_law(self)
         return self
 
     # ------------------------------------------------------------------ convenience

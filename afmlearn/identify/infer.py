@@ -19,8 +19,11 @@ atomically: temporary sibling + ``os.replace``):
 ``force.h5``
     ``force_n`` [N] aligned sample by sample with the input deflection (same shape; NaN where
     the force is undefined and, for a sweep, in every row but the identified one),
-    ``force_lo_n`` / ``force_hi_n`` (95 % bagging band), ``gap_m`` (instantaneous tip--sample
-    gap of the denoised orbit, same shape) and ``time_s`` (n,); units in attributes.
+    ``force_lo_n`` / ``force_hi_n`` (95 % band: bagging for one orbit, the output-error
+    profile-likelihood band for a joint fit, :mod:`.force_band`; attribute ``band``),
+    ``gap_m`` (instantaneous tip--sample gap of the denoised orbit, same shape) and ``time_s``
+    (n,); units in attributes. When the exponent is fixed (``exponent_fixed`` attribute) the
+    force and band are the quoted law's and ``fitted_force_n`` is the fitted law's.
 Figures are the caller's (``figures``: a callable, e.g.
 :func:`afmlearn.plots.identify.identify_figures` from ``scripts/identify.py``): this module never
 imports :mod:`afmlearn.plots`.
@@ -299,12 +302,8 @@ def write_series_force_h5(path: str | os.PathLike[str], ide: ForceIdentifier,
     n = shape[1]
     z = np.asarray(ide.joint_.problem.length_m, float)
     gaps = np.array([o.gap for o in ide.joint_.problem.observations])
-    series = {
-        "force_n": np.asarray(ide.force_, float) * sc.force,
-        "force_lo_n": np.asarray(ide.force_lo_, float) * sc.force,
-        "force_hi_n": np.asarray(ide.force_hi_, float) * sc.force,
-        "gap_m": (gaps[:, None] - np.asarray(ide.state_x_, float)) * z,
-    }
+    series, quoted, fixed = _quoted_force(ide, sc.force)
+    series["gap_m"] = (gaps[:, None] - np.asarray(ide.state_x_, float)) * z
     path = Path(path)
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         for key, value in series.items():
@@ -321,10 +320,42 @@ def write_series_force_h5(path: str | os.PathLike[str], ide: ForceIdentifier,
         f.attrs["afmlearn_version"] = afmlearn.__version__
         f.attrs["row"] = -1
         f.attrs["joint"] = True
-        f.attrs["equation"] = ide.model_.equation()
-        f.attrs["equation_si"] = ide.model_.equation_si()
+        _equation_attrs(f, ide, quoted, fixed)
+        f.attrs["band"] = (fixed.band if fixed is not None and fixed.force is not None else
+                           "95 % profile-likelihood band of the output-error fit (the "
+                           "exponent's profile and each point's Gauss-Newton band in a0 and "
+                           "the coefficients)" if ide.joint_.output_error is not None else
+                           "2.5 / 97.5 % over the bootstrap models")
         f.attrs["nan_means"] = "force band undefined (no bootstrap)"
     return path
+
+
+def _quoted_force(ide: ForceIdentifier, force_n: float
+                  ) -> tuple[dict[str, Any], Any, Any]:
+    """force.h5's force datasets [N]: the quoted law's force and band (the law re-fitted at a
+    fixed exponent when the data do not bound it, with the fitted law's force as
+    ``fitted_force_n``), the quoted model and the fixed-exponent law (or None)."""
+    fixed = getattr(ide, "fixed_exponent_", None)
+    if fixed is not None and fixed.force is not None and fixed.model is not None:
+        fo = fixed.force
+        return ({"force_n": np.asarray(fo["force"], float) * force_n,
+                 "force_lo_n": np.asarray(fo["lo"], float) * force_n,
+                 "force_hi_n": np.asarray(fo["hi"], float) * force_n,
+                 "fitted_force_n": np.asarray(ide.force_, float) * force_n},
+                fixed.model, fixed)
+    return ({"force_n": np.asarray(ide.force_, float) * force_n,
+             "force_lo_n": np.asarray(ide.force_lo_, float) * force_n,
+             "force_hi_n": np.asarray(ide.force_hi_, float) * force_n}, ide.model_, None)
+
+
+def _equation_attrs(f: Any, ide: ForceIdentifier, quoted: Any, fixed: Any) -> None:
+    """The quoted law's equation (and, when the exponent is fixed, the fitted one)."""
+    f.attrs["equation"] = quoted.equation()
+    f.attrs["equation_si"] = quoted.equation_si()
+    if fixed is not None:
+        f.attrs["exponent_fixed"] = float(fixed.exponent)
+        f.attrs["fitted_equation"] = ide.model_.equation()
+        f.attrs["fitted_equation_si"] = ide.model_.equation_si()
 
 
 # ---------------------------------------------------------------------------- records
@@ -336,7 +367,7 @@ def result_record(ide: ForceIdentifier, cal: Calibrated, *, input_path: str | os
     si = model.si_terms()
     summary = jsonable(ide.summary_)
     # an exponent the data do not bound is not quoted: the law at the sphere's 1.5 instead
-    fixed = fixed_exponent_law(ide)
+    fixed = ide.fixed_exponent_ if hasattr(ide, "fixed_exponent_") else fixed_exponent_law(ide)
     quoted = model if fixed is None or fixed.model is None else fixed.model
     if fixed is not None:
         summary["interaction_exponent_fixed"] = fixed.exponent
@@ -466,16 +497,16 @@ def write_force_h5(path: str | os.PathLike[str], ide: ForceIdentifier, cal: Cali
     sc = cal.scales
     n = cal.n_samples
     gap = np.broadcast_to(np.asarray(cal.gap, float), (n,))
-    series = {
-        "force_n": np.asarray(ide.force_, float) * sc.force,
-        "force_lo_n": np.asarray(ide.force_lo_, float) * sc.force,
-        "force_hi_n": np.asarray(ide.force_hi_, float) * sc.force,
-        "gap_m": (gap - np.asarray(ide.state_x_, float)) * sc.length,
-    }
-    units = {"force_n": "N", "force_lo_n": "N", "force_hi_n": "N", "gap_m": "m"}
-    desc = {"force_n": "identified tip-sample force, > 0 repulsive",
-            "force_lo_n": "2.5 % quantile of the force over the bagged models",
-            "force_hi_n": "97.5 % quantile of the force over the bagged models",
+    series, quoted, fixed = _quoted_force(ide, sc.force)
+    series["gap_m"] = (gap - np.asarray(ide.state_x_, float)) * sc.length
+    units = {k: "N" for k in series} | {"gap_m": "m"}
+    band = (fixed.band if fixed is not None and fixed.force is not None
+            else "the bagged models")
+    desc = {"force_n": "identified tip-sample force (the quoted law), > 0 repulsive",
+            "force_lo_n": f"2.5 % quantile of the force over {band}",
+            "force_hi_n": f"97.5 % quantile of the force over {band}",
+            "fitted_force_n": "force of the fitted law (model.json) whose exponent the data "
+                              "do not bound",
             "gap_m": "instantaneous tip-sample gap z = rest gap - deflection (denoised)"}
     path = Path(path)
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
@@ -494,8 +525,7 @@ def write_force_h5(path: str | os.PathLike[str], ide: ForceIdentifier, cal: Cali
         f.attrs["format"] = "afmlearn-force"
         f.attrs["afmlearn_version"] = afmlearn.__version__
         f.attrs["row"] = -1 if row is None else int(row)
-        f.attrs["equation"] = ide.model_.equation()
-        f.attrs["equation_si"] = ide.model_.equation_si()
+        _equation_attrs(f, ide, quoted, fixed)
         f.attrs["heldout_start"] = int(ide.heldout_start_)
         f.attrs["nan_means"] = "force undefined (or row not identified)"
     return path

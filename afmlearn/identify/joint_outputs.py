@@ -15,11 +15,12 @@ from numpy.typing import NDArray
 
 from simulator import Scales
 
+from .force_band import conditional_band, profile_band
 from .joint import JointResult
 from .library import AFMLibrary, Constant, TermInput
 from .model import IdentifiedModel
 
-__all__ = ["joint_force", "joint_model", "joint_summary", "format_exponent"]
+__all__ = ["joint_force", "joint_model", "joint_summary", "format_exponent", "orbit_inputs"]
 
 FloatArray = NDArray[np.float64]
 
@@ -60,18 +61,25 @@ def joint_model(res: JointResult, coef: FloatArray, library: AFMLibrary, a0: flo
 def joint_force(res: JointResult) -> dict[str, FloatArray]:
     """Force [k L_ref] on every sample of every observation, shape (n_obs, n) each.
 
-    Keys ``force``, ``lo``, ``hi`` (2.5 / 97.5 % over the bootstrap models; NaN without
-    bootstrap), ``x``, ``v`` (denoised deflection and rate), ``z`` (gap ``gap_i - x``).
+    Keys ``force``, ``lo``, ``hi``, ``x``, ``v`` (denoised deflection and rate), ``z`` (gap
+    ``gap_i - x``). The 95 % band: with the output-error stage, the profile-likelihood band
+    of :func:`~afmlearn.identify.force_band.profile_band` (the exponent's profile and each
+    point's Gauss--Newton band in ``a0`` and the coefficients; without a profile, the
+    estimate's Gauss--Newton band); else 2.5 / 97.5 % over the bootstrap models (NaN without
+    bootstrap).
     """
     pb = res.problem
     n_lin = pb.n_lin
     out: dict[str, list[FloatArray]] = {k: [] for k in ("force", "lo", "hi", "x", "v", "z")}
-    for o in pb.observations:
+    band = _output_error_band(res)
+    for i, o in enumerate(pb.observations):
         x, v = o.denoised.x, o.denoised.v
         z = o.gap - x
         th = res.library.evaluate(TermInput(z=z, zdot=-v, x=x, a0=res.a0))
         f = th @ res.coef[n_lin:]
-        if res.samples.shape[0] >= 5:
+        if band is not None:
+            lo, hi = band["lo"][i], band["hi"][i]
+        elif res.samples.shape[0] >= 5:
             fs = res.samples[:, n_lin:] @ th.T
             lo, hi = np.percentile(fs, [2.5, 97.5], axis=0)
         else:
@@ -80,6 +88,26 @@ def joint_force(res: JointResult) -> dict[str, FloatArray]:
                           strict=True):
             out[k].append(val)
     return {k: np.stack(v) for k, v in out.items()}
+
+
+def orbit_inputs(res: JointResult) -> list[TermInput]:
+    """The denoised orbit of every observation as library input (``a0`` of the fit)."""
+    return [TermInput(z=o.gap - o.denoised.x, zdot=-o.denoised.v, x=o.denoised.x, a0=res.a0)
+            for o in res.problem.observations]
+
+
+def _output_error_band(res: JointResult) -> dict[str, list[FloatArray]] | None:
+    """The output-error fit's 95 % force band (None without that stage)."""
+    oe = res.output_error
+    if oe is None:
+        return None
+    ins = orbit_inputs(res)
+    ex = res.exponent or {}
+    if ex.get("fits"):
+        band = profile_band(ex, oe, ins)
+        if band is not None:
+            return band
+    return conditional_band(oe, ins)
 
 
 def joint_summary(res: JointResult, model: IdentifiedModel, forces: dict[str, FloatArray]

@@ -343,6 +343,15 @@ def plot_force(identifier: Any, path: str | os.PathLike[str], true_force: FloatA
     ell_nm = sc.length * 1e9
     f = np.asarray(identifier.force_, float)
     lo, hi = np.asarray(identifier.force_lo_, float), np.asarray(identifier.force_hi_, float)
+    fitted, label, band = None, "identified", "95 % band (bagging)"
+    fixed = getattr(identifier, "fixed_exponent_", None)
+    if fixed is not None and fixed.force is not None:
+        # the exponent is not identifiable: the quoted law (re-fitted at the fixed exponent)
+        # with its band, the fitted law as a thin secondary line
+        fitted, f = f, np.asarray(fixed.force["force"], float)
+        lo, hi = np.asarray(fixed.force["lo"], float), np.asarray(fixed.force["hi"], float)
+        label = f"quoted law (exponent fixed at {fixed.exponent:g})"
+        band = f"95 % band (bagging, exponent fixed at {fixed.exponent:g})"
     z = gap - identifier.state_x_
     zd = -np.asarray(identifier.state_v_, float)
     t_us = tau / sc.omega0 * 1e6
@@ -352,8 +361,11 @@ def plot_force(identifier: Any, path: str | os.PathLike[str], true_force: FloatA
     ax1, ax2 = fig.subplots(1, 2)
     if np.any(np.isfinite(lo[sl])):
         ax1.fill_between(t_us[sl], lo[sl] * f_nn, hi[sl] * f_nn, color=_KNEE, alpha=0.25,
-                         lw=0, label="95 % band (bagging)")
-    ax1.plot(t_us[sl], f[sl] * f_nn, color=_KNEE, lw=1.1, label="identified")
+                         lw=0, label=band)
+    ax1.plot(t_us[sl], f[sl] * f_nn, color=_KNEE, lw=1.1, label=label)
+    if fitted is not None:
+        ax1.plot(t_us[sl], fitted[sl] * f_nn, ":", color="0.45", lw=0.8,
+                 label="fitted law (exponent not identified)")
     if true_force is not None:
         ax1.plot(t_us[sl], np.asarray(true_force)[sl] * f_nn, "--", color="k", lw=1,
                  label="true")
@@ -407,15 +419,21 @@ def plot_force_series(identifier: Any, path: str | os.PathLike[str]) -> Path:
         z = o.gap + res.problem.offsets[i] - np.asarray(identifier.state_x_[i], float)
         zd = -np.asarray(identifier.state_v_[i], float)
         f = np.asarray(identifier.force_[i], float)
+        fixed = getattr(identifier, "fixed_exponent_", None)
+        if fixed is not None and fixed.force is not None:  # the quoted law at the fixed p
+            f = np.asarray(fixed.force["force"][i], float)
         cur = force_vs_gap(z, zd, f, n_bins=120)
         colour = (i / max(n_obs - 1, 1), 0.3, 1 - i / max(n_obs - 1, 1))
         ax1.plot(cur["gap"] * ell_nm, cur["approach"] * f_nn, "-", color=colour, lw=1,
                  label=f"rest gap {o.gap * ell_nm:.2f} nm")
-    ax1.axvline(model.a0 * ell_nm, color="0.3", ls=":", lw=1, label="a0")
+    fixed = getattr(identifier, "fixed_exponent_", None)
+    quoted = fixed.model if fixed is not None and fixed.force is not None else model
+    ax1.axvline(quoted.a0 * ell_nm, color="0.3", ls=":", lw=1, label="a0")
     ax1.axhline(0, color="0.6", lw=0.6)
     ax1.set_xlabel("gap z [nm]")
     ax1.set_ylabel("F_ts [nN] (> 0 repulsive), approach")
-    ax1.set_title(f"One law, {n_obs} set-points")
+    ax1.set_title(f"One law, {n_obs} set-points" + (
+        "" if quoted is model else f" (exponent fixed at {fixed.exponent:g})"))
     ax1.legend(fontsize="x-small")
     prof = identifier.exponent_profile_
     if prof is not None:

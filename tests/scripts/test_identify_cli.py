@@ -51,6 +51,10 @@ def test_identify_writes_result_and_aligned_force(tmp_path, trace_path):
     with h5py.File(out / "force.h5", "r") as f:
         force = f["force_n"][()]
         assert f["force_lo_n"].shape == f["force_hi_n"].shape == trace.deflection_m.shape
+        # the exponent is fixed (below): force.h5 holds the quoted law, the fitted one beside
+        quoted, fixed_p = f.attrs["equation"], float(f.attrs["exponent_fixed"])
+        assert f["fitted_force_n"].shape == force.shape
+        lo, hi = f["force_lo_n"][()], f["force_hi_n"][()]
     assert force.shape == trace.deflection_m.shape
     assert np.isfinite(force).mean() > 0.9
     # a tapping trace: repulsive peaks of nN size (simulated peak ~ 10 nN), some attraction
@@ -64,7 +68,10 @@ def test_identify_writes_result_and_aligned_force(tmp_path, trace_path):
     assert summary["interaction_exponent_bounded"] is False
     fixed = res["exponent_fixed"]
     assert fixed["exponent"] == 1.5 and summary["interaction_exponent_fixed"] == 1.5
-    assert res["equation"] == fixed["equation"]
+    assert res["equation"] == fixed["equation"] == quoted and fixed_p == 1.5
+    ok = np.isfinite(lo) & np.isfinite(force)
+    assert ok.mean() > 0.9 and np.all(lo[ok] <= force[ok] + 1e-15)
+    assert np.all(force[ok] <= hi[ok] + 1e-15)
     assert re.search(r"delta\^1\.5(?![0-9])", res["equation"])
     assert re.search(r"delta\^1\.5(?![0-9])", res["equation_si"])
     # the refit is a fit: inside the 95 % profile interval (rise below 3.84), a0 in range
@@ -173,6 +180,8 @@ def test_series_file_all_rows_jointly_and_bad_row(tmp_path, run_script):
         assert fixed is not None and fixed["text"] in proc.stdout
         if fixed.get("equation"):
             assert res["equation"] == fixed["equation"]
+            with h5py.File(out / "force.h5", "r") as f:  # the quoted law's force and band
+                assert f.attrs["equation"] == res["equation"] and "fitted_force_n" in f
             assert re.search(r"delta\^1\.5(?![0-9])", res["equation"])
         else:
             assert "NOT an identified exponent" in fixed["text"] or fixed["exponent"] is None
