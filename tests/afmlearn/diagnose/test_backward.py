@@ -187,17 +187,16 @@ def test_demo_damping_keeps_no_cause_with_a_zero_coefficient(tmp_path):
 
 @pytest.mark.slow
 def test_two_real_causes_both_stay_named(make_series):
-    """Visco-elastic loss and a detector nonlinearity at once (the draw of
-    ``test_diagnoser.test_two_effects_are_named_step_by_step``): both are named step by step
-    and the backward check keeps both, each raising chi2 far above its threshold when it is
-    removed from the final model and adding held-out gain there."""
-    path, case = make_series("viscoelastic+detector_nonlinearity", 7)
+    """A long-range damping and a detector nonlinearity at once (4 set-points x 20 periods,
+    dev seed 2): both are named step by step and the backward check keeps both, each raising
+    chi2 far above its threshold when removed from the final model (measured 101 / 28,437,
+    thresholds 9.88) and adding held-out gain there (0.87 / 0.89)."""
+    path, case = make_series("long_range_damping+detector_nonlinearity", 2)
     dg = Diagnoser(hypotheses=[Viscoelastic(), DetectorNonlinearity(), LongRangeDamping()])
     dg.fit(read_trace(path))
     named = [s.cause for s in dg.causes_]
     msg = f"kept {named}, dropped {dg.dropped_causes_}"
-    assert len(named) == 2 and "detector_nonlinearity" in named, msg
-    assert {"viscoelastic", "long_range_damping"} & set(named), msg
+    assert sorted(named) == sorted(case.causes), msg
     assert dg.dropped_causes_ == [], msg
     for s in dg.causes_:
         assert s.removal is not None and s.removal.kept, msg
