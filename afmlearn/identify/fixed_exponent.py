@@ -241,8 +241,8 @@ def _joint_law(ide: ForceIdentifier, p: float, exponent: float) -> _Refit:
         band = conditional_band(fit, orbit_inputs(res))
         force = {k: np.stack(v) for k, v in band.items()}
         return (model, rise, "the output-error profile's fit at this exponent", force,
-                f"Gauss-Newton band of the fit at the fixed exponent {exponent:g} (a0 and the "
-                "force coefficients, delta method)")
+                f"simultaneous Gauss-Newton band of the fit at the fixed exponent {exponent:g} "
+                "(a0 and the force coefficients, delta method)")
     j = _contact_index(res.library, p)
     if j is None:
         return _NONE

@@ -322,9 +322,9 @@ def write_series_force_h5(path: str | os.PathLike[str], ide: ForceIdentifier,
         f.attrs["joint"] = True
         _equation_attrs(f, ide, quoted, fixed)
         f.attrs["band"] = (fixed.band if fixed is not None and fixed.force is not None else
-                           "95 % profile-likelihood band of the output-error fit (the "
-                           "exponent's profile and each point's Gauss-Newton band in a0 and "
-                           "the coefficients)" if ide.joint_.output_error is not None else
+                           "95 % simultaneous profile-likelihood band of the output-error "
+                           "fit (the exponent's profile and each point's Gauss-Newton band in "
+                           "a0 and the coefficients)" if ide.joint_.output_error is not None else
                            "2.5 / 97.5 % over the bootstrap models")
         f.attrs["nan_means"] = "force band undefined (no bootstrap)"
     return path

@@ -62,11 +62,11 @@ def joint_force(res: JointResult) -> dict[str, FloatArray]:
     """Force [k L_ref] on every sample of every observation, shape (n_obs, n) each.
 
     Keys ``force``, ``lo``, ``hi``, ``x``, ``v`` (denoised deflection and rate), ``z`` (gap
-    ``gap_i - x``). The 95 % band: with the output-error stage, the profile-likelihood band
-    of :func:`~afmlearn.identify.force_band.profile_band` (the exponent's profile and each
-    point's Gauss--Newton band in ``a0`` and the coefficients; without a profile, the
-    estimate's Gauss--Newton band); else 2.5 / 97.5 % over the bootstrap models (NaN without
-    bootstrap).
+    ``gap_i - x``). The 95 % band: with the output-error stage, the simultaneous
+    profile-likelihood band of :func:`~afmlearn.identify.force_band.profile_band` (the
+    exponent's profile and each point's Gauss--Newton band in ``a0`` and the coefficients;
+    without a profile, the estimate's Gauss--Newton band); else 2.5 / 97.5 % over the
+    bootstrap models (NaN without bootstrap).
     """
     pb = res.problem
     n_lin = pb.n_lin

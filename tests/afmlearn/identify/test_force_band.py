@@ -61,8 +61,12 @@ def test_delta_method_matches_sampling_of_the_covariance():
         TermInput(z=ti[0].z, zdot=ti[0].zdot, x=ti[0].x, a0=0.03)) @ res.u[5:])
     deep = ti[0].z < 0.02  # away from the onset's kink
     np.testing.assert_allclose(sd[deep], fs.std(axis=0)[deep], rtol=0.05)
-    band = conditional_band(res, ti)
+    band = conditional_band(res, ti, simultaneous=False)
     np.testing.assert_allclose(band["hi"][0] - band["lo"][0], 2 * Z95 * sd)
+    # simultaneous over a0 and the two coefficients: chi2_3(0.95) = 7.815
+    band = conditional_band(res, ti)
+    np.testing.assert_allclose(band["hi"][0] - band["lo"][0], 2 * math.sqrt(7.8147) * sd,
+                               rtol=1e-4)
 
 
 def test_free_exponent_covariance_is_conditioned_on_the_exponent():
@@ -80,8 +84,10 @@ def test_profile_envelope_uses_points_inside_the_level_and_the_interpolated_ends
     """Known answer: three zero-covariance profile points (p 1.3, 1.5, 1.7; rises 4 x level,
     0, 4 x level): the band is [F_1.5 + w (F_1.3 - F_1.5), F_1.5 + w (F_1.7 - F_1.5)] per
     sample with w = 1/2 (sqrt(rise) linear), and the outside points' own forces are not in it;
-    a covariance at the estimate adds 1.96 sd."""
-    level = 3.841
+    a covariance at the estimate adds 1.96 sd (pointwise level 3.841); the simultaneous
+    level (chi2_4 = 9.49 for a0, p and two coefficients) takes the 1.3 and 1.7 points' forces
+    in at w = sqrt(9.49 / 15.36)."""
+    level = Z95**2
     fits = {1.3: _result(1.3, 0.03, (2.0, 0.0)), 1.5: _result(1.5, 0.03, (2.0, 0.0)),
             1.7: _result(1.7, 0.03, (2.0, 0.0))}
     prof = np.array([[1.3, 4 * level], [1.5, 0.0], [1.7, 4 * level]]) + [0, 500.0]
@@ -91,7 +97,7 @@ def test_profile_envelope_uses_points_inside_the_level_and_the_interpolated_ends
     prof[:, 1] += shift
     expo = {"profile": prof, "fits": fits, "level": level, "dispersion": 1.0}
     ti = _inputs()
-    band = profile_band(expo, best, ti)
+    band = profile_band(expo, best, ti, simultaneous=False)
     assert band is not None
     f = {p: LAW.library_at(r.u).evaluate(ti[0]) @ r.u[5:] for p, r in fits.items()}
     lo_ref = np.minimum(f[1.5], np.minimum(f[1.5] + 0.5 * (f[1.3] - f[1.5]),
@@ -106,17 +112,23 @@ def test_profile_envelope_uses_points_inside_the_level_and_the_interpolated_ends
     cov[5, 5] = 1e-2
     wide = dict(fits)
     wide[1.5] = _result(1.5, 0.03, (2.0, 0.0), cov)
-    b2 = profile_band({**expo, "fits": wide}, wide[1.5], ti)
+    b2 = profile_band({**expo, "fits": wide}, wide[1.5], ti, simultaneous=False)
     assert b2 is not None
     d15 = np.maximum(0.03 - ti[0].z, 0.0) ** 1.5
     np.testing.assert_allclose(b2["hi"][0], np.maximum(hi_ref, f[1.5] + Z95 * 0.1 * d15),
                                atol=1e-12)
+    b3 = profile_band(expo, best, ti)
+    assert b3 is not None
+    w = math.sqrt(9.4877 / (4 * level))
+    ends = [f[1.5] + w * (f[q] - f[1.5]) for q in (1.3, 1.7)]
+    np.testing.assert_allclose(b3["hi"][0], np.maximum(f[1.5], np.maximum(*ends)), atol=1e-6)
 
 
 def _coverage(seed: int) -> tuple[float, float, float]:
     """Fraction of the repulsive samples whose true force (the simulator's law on the same
-    denoised orbits) lies in the profile band, in the Gauss--Newton band at the estimate's
-    exponent, and the band width ratio profile / GN (median over repulsive samples)."""
+    denoised orbits) lies in the (simultaneous) profile band, in the pointwise Gauss--Newton
+    band at the estimate's exponent (a0 and the coefficients), and the band width ratio
+    profile / GN (median over repulsive samples)."""
     import tempfile
 
     with tempfile.TemporaryDirectory() as d:
@@ -133,7 +145,7 @@ def _coverage(seed: int) -> tuple[float, float, float]:
     ins = [TermInput(z=o.gap - o.denoised.x, zdot=-o.denoised.v, x=o.denoised.x, a0=a0)
            for o in pb.observations]
     band = profile_band(prof, best, ins)
-    gn = conditional_band(best, ins)
+    gn = conditional_band(best, ins, simultaneous=False)
     assert band is not None
     inside = [0, 0]
     ratio, n = [], 0
