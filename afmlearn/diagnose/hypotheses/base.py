@@ -119,6 +119,9 @@ class AbstractHypothesis(abc.ABC):
     #: joint fits with a calibrated drive and recorded phases: the scan's starts come from the
     #: energy balance per set-point (``fit.energy_starts``), the grid scan when there are none
     energy_balance_start: ClassVar[bool] = False
+    #: energy-balance starts: how many of the extension's grid points per onset (those whose
+    #: one coefficient fits the set-points' energies best) are shot and refined
+    energy_scan: ClassVar[int] = 1
 
     @abc.abstractmethod
     def parameters(self, ctx: Context) -> list[Parameter]:
