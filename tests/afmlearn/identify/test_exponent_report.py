@@ -11,6 +11,8 @@ import re
 from pathlib import Path
 from types import SimpleNamespace
 
+import h5py
+import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
@@ -81,3 +83,12 @@ def test_short_series_of_one_amplitude_quotes_the_output_error_fit_at_the_sphere
     vdw = [t for t in fixed["si_terms"] if t["term"].startswith("z^-2")]
     hr6 = cfg.force.hamaker_j * cfg.cantilever.tip_radius_m / 6.0
     assert len(vdw) == 1 and abs(vdw[0]["coefficient"]) == pytest.approx(hr6, rel=0.2)
+    # force.h5 holds the quoted law's force with its band (conditional on p = 1.5), the fitted
+    # law's force beside it
+    with h5py.File(tmp_path / "out" / "force.h5", "r") as f:
+        assert f.attrs["equation"] == res["equation"] and float(f.attrs["exponent_fixed"]) == 1.5
+        force, lo, hi = (f[k][()] for k in ("force_n", "force_lo_n", "force_hi_n"))
+        assert f["fitted_force_n"].shape == force.shape
+        assert not np.allclose(f["fitted_force_n"][()], force, rtol=1e-3, atol=0.0)
+    assert np.all(np.isfinite(lo)) and np.all((lo <= force + 1e-18) & (force <= hi + 1e-18))
+    assert np.max(hi - lo) > 0
