@@ -170,6 +170,9 @@ def _diagnose(out: Path, seed: int | None) -> None:
     print(f"  cause:      {rep['cause']}  (confidence {rep['confidence']:.2f})")
     for i, step in enumerate(rep.get("causes", []), 1):
         print(f"  step {i}:     {step['cause']}, gain added {step['gain']:.3f}")
+    for d in rep.get("dropped_causes", []):
+        print(f"  dropped:    {d['cause']} (named step by step, then removed from the final model: "
+              f"{d['reason']})")
     if rep["cause"] != "none":
         print(f"  gain:       {rep['gain']:.3f}  (NRMSE on set-points never fitted "
               f"{rep['baseline']['heldout_nrmse']:.3g} -> {rep['extended']['heldout_nrmse']:.3g})")

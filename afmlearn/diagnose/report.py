@@ -35,7 +35,8 @@ from afmlearn.io import jsonable, read_trace, write_json
 from afmlearn.io._atomic import atomic_path
 from afmlearn.preprocess import checked_row
 
-from .diagnoser import Diagnoser, Removal
+from .backward import Removal
+from .diagnoser import Diagnoser
 from .hypotheses import default_hypotheses
 from .hypotheses.contact_geometry import exponent_summary
 from .model import DiagnosisModel

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from afmlearn.diagnose import Diagnoser
-from afmlearn.diagnose.diagnoser import backward_eliminate, backward_keep
+from afmlearn.diagnose.backward import backward_eliminate, backward_keep
 from afmlearn.diagnose.hypotheses import DetectorNonlinearity, LongRangeDamping, Viscoelastic
 from afmlearn.diagnose.observation import read_experiment
 from afmlearn.diagnose.report import report_markdown, report_record
