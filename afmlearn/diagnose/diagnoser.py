@@ -699,7 +699,7 @@ class Diagnoser:
                 extensions=tuple(e for e in fin.sol.spec.extensions if e.key not in keys),
                 **({"contact_exponent": exponent0} if exponent else {}))
             build, params = structure(None, spec, ctx)
-            coef = _restrict(spec, fin.sol.spec, fin.sol.coef)
+            coef = spec.restrict(fin.sol.spec, fin.sol.coef)
             start = dataclasses.replace(fin.sol, spec=spec, coef=coef, values=(spec.a0,))
             if fin.warm is not None:
                 # shot from the final model's own orbits, also where the removal changes the
@@ -1233,21 +1233,6 @@ def _seeded(snapshot: tuple[dict, dict, list[float]], full: Any, spec: Any
         if (i, old) in jac and not merge:
             jac[(i, new)] = np.array(jac[(i, old)], float)
     return warm, jac, list(phases)
-
-
-def _restrict(spec: Any, full: Any, coef: FloatArray) -> FloatArray:
-    """``coef`` of spec ``full`` restricted to its nested ``spec`` (the force coefficients of
-    the columns ``spec`` keeps, lever, drive and further drive amplitudes carried over; the
-    inverse of :meth:`~afmlearn.diagnose.spec.ModelSpec.embed`)."""
-    coef = np.asarray(coef, float)
-    extra = coef[3 + full.n_force:]
-    out = np.zeros(3 + spec.n_force + extra.size)
-    out[:3] = coef[:3]
-    out[3 + spec.n_force:] = extra
-    theirs = full.term_keys()
-    for j, k in enumerate(spec.term_keys()):
-        out[3 + j] = coef[3 + theirs.index(k)]
-    return out
 
 
 def _typical(a: FloatArray) -> float:

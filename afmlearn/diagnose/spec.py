@@ -328,6 +328,20 @@ class ModelSpec:
             out[3 + mine.index(key)] = coef[3 + j]
         return out
 
+    def restrict(self, full: ModelSpec, coef: FloatArray) -> FloatArray:
+        """``coef`` of a spec ``full`` that nests this one, restricted to this spec's layout
+        (the force coefficients of the columns this spec keeps; lever, drive and further drive
+        amplitudes carried over): the inverse of :meth:`embed`."""
+        coef = np.asarray(coef, float)
+        extra = coef[3 + full.n_force:]
+        out = np.zeros(3 + self.n_force + extra.size)
+        out[:3] = coef[:3]
+        out[3 + self.n_force:] = extra
+        theirs = full.term_keys()
+        for j, key in enumerate(self.term_keys()):
+            out[3 + j] = coef[3 + theirs.index(key)]
+        return out
+
     def signs(self) -> list[int]:
         """Sign constraint of each force coefficient (+1 >= 0, -1 <= 0, 0 free)."""
         out = [int(t.sign) for t in self.library().terms]

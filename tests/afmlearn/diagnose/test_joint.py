@@ -58,6 +58,17 @@ def test_embed_places_nested_coefficients_by_feature():
     assert np.array_equal(out[:5], coef[:5])
 
 
+def test_restrict_inverts_embed_with_further_drive_amplitudes():
+    """The backward check restricts the final model's coefficients to a nested spec."""
+    base = ModelSpec(a0=0.03, extensions=(ElectrostaticTerm(radius=0.5),))
+    ext = base.with_extension(ViscoelasticTerm(exponent=0.5)).with_extension(Neck(length=0.1))
+    coef = np.array([1.0, 0.003, 0.004, -1e-4, 2.0, -3e-3, 0.005])   # ... elec, 2nd drive
+    full = ext.embed(base, coef)
+    full[3 + ext.term_keys().index("visco")] = 7.0                   # dropped by restrict
+    assert np.array_equal(base.restrict(ext, full), coef)
+    assert full[-1] == 0.005
+
+
 @pytest.fixture(scope="module")
 def series(make_series):
     path, case = make_series("none", 3)
