@@ -318,29 +318,13 @@ class ModelSpec:
         """``coef = [K, D, B, c..]`` of a nested ``spec`` placed into this spec's layout (the
         columns this spec adds start at zero). The drive amplitudes of further drive groups,
         after the force coefficients (:mod:`~afmlearn.diagnose.joint`), are carried over."""
-        coef = np.asarray(coef, float)
-        extra = coef[3 + spec.n_force:]
-        out = np.zeros(3 + self.n_force + extra.size)
-        out[:3] = coef[:3]
-        out[3 + self.n_force:] = extra
-        mine = self.term_keys()
-        for j, key in enumerate(spec.term_keys()):
-            out[3 + mine.index(key)] = coef[3 + j]
-        return out
+        return _relayout(coef, spec, self, src_in_dst=True)
 
     def restrict(self, full: ModelSpec, coef: FloatArray) -> FloatArray:
         """``coef`` of a spec ``full`` that nests this one, restricted to this spec's layout
         (the force coefficients of the columns this spec keeps; lever, drive and further drive
         amplitudes carried over): the inverse of :meth:`embed`."""
-        coef = np.asarray(coef, float)
-        extra = coef[3 + full.n_force:]
-        out = np.zeros(3 + self.n_force + extra.size)
-        out[:3] = coef[:3]
-        out[3 + self.n_force:] = extra
-        theirs = full.term_keys()
-        for j, key in enumerate(self.term_keys()):
-            out[3 + j] = coef[3 + theirs.index(key)]
-        return out
+        return _relayout(coef, full, self, src_in_dst=False)
 
     def signs(self) -> list[int]:
         """Sign constraint of each force coefficient (+1 >= 0, -1 <= 0, 0 free)."""
@@ -416,3 +400,24 @@ def invert_polynomial(y: FloatArray, coefficients: Sequence[float]) -> FloatArra
         if np.max(np.abs(step)) < 1e-13:
             break
     return x
+
+
+def _relayout(coef: FloatArray, src: ModelSpec, dst: ModelSpec, *,
+              src_in_dst: bool) -> FloatArray:
+    """``coef = [K, D, B, c.., further drive amplitudes]`` of ``src`` in ``dst``'s layout:
+    lever, drive and further drive amplitudes carried over, force coefficients placed by their
+    :meth:`ModelSpec.term_keys` (a column ``dst`` has and ``src`` has not starts at zero).
+    ``src_in_dst``: every column of ``src`` must exist in ``dst`` (embedding a nested spec);
+    else every column of ``dst`` must exist in ``src`` (restricting to a nested spec)."""
+    coef = np.asarray(coef, float)
+    src_keys, dst_keys = src.term_keys(), dst.term_keys()
+    inner, outer = (src_keys, dst_keys) if src_in_dst else (dst_keys, src_keys)
+    missing = [k for k in inner if k not in outer]
+    assert not missing, f"spec columns {missing} are not nested"
+    out = np.zeros(3 + dst.n_force + coef.size - 3 - src.n_force)
+    out[:3] = coef[:3]
+    out[3 + dst.n_force:] = coef[3 + src.n_force:]
+    for j, key in enumerate(dst_keys):
+        if key in src_keys:
+            out[3 + j] = coef[3 + src_keys.index(key)]
+    return out
