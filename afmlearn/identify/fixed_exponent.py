@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
+from .joint_outputs import finite_number
 from .library import AFMLibrary, Indentation
 from .model import IdentifiedModel
 
@@ -114,7 +115,7 @@ def fixed_exponent_law(ide: ForceIdentifier, *, exponent: float = SPHERE_EXPONEN
     s = ide.summary_
     p = s.get("interaction_exponent")
     iv = s.get("interaction_exponent_interval")
-    if p is None or iv is None or not all(_finite(v) for v in iv) \
+    if p is None or iv is None or not all(finite_number(v) for v in iv) \
             or s.get("interaction_exponent_bounded") is not False:
         return None
     lo, hi = float(iv[0]), float(iv[1])
@@ -140,7 +141,7 @@ def fixed_exponent_law(ide: ForceIdentifier, *, exponent: float = SPHERE_EXPONEN
                 f"delta^{p:.6g}, NOT an identified exponent: do not quote it")
     else:
         text = (head + f"; equation re-fitted at {exponent:g} ({method}"
-                + (f"; profile rise {rise:.2f}, 3.84 at 95 %" if _finite(rise) else "")
+                + (f"; profile rise {rise:.2f}, 3.84 at 95 %" if finite_number(rise) else "")
                 + ")")
     return FixedExponentLaw(exponent=exponent, model=model, rise=rise, method=method, text=text,
                             force=force if model is not None else None, band=band)
@@ -266,7 +267,3 @@ def _joint_law(ide: ForceIdentifier, p: float, exponent: float) -> _Refit:
     return (model, math.nan, "a0 and every coefficient, equation error",
             {"force": f, "lo": lo, "hi": hi},
             f"the bootstrap refits at the fixed exponent {exponent:g} (a0 held)")
-
-
-def _finite(v: Any) -> bool:
-    return v is not None and isinstance(v, int | float) and math.isfinite(v)

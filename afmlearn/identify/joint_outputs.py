@@ -20,7 +20,8 @@ from .joint import JointResult
 from .library import AFMLibrary, Constant, TermInput
 from .model import IdentifiedModel
 
-__all__ = ["joint_force", "joint_model", "joint_summary", "format_exponent", "orbit_inputs"]
+__all__ = ["joint_force", "joint_model", "joint_summary", "format_exponent", "orbit_inputs",
+           "finite_number"]
 
 FloatArray = NDArray[np.float64]
 
@@ -170,7 +171,7 @@ def format_exponent(summary: dict[str, Any]) -> str:
     iv = summary.get("interaction_exponent_interval")
     if p is None:
         return "interaction exponent: no contact term identified"
-    if iv is None or not all(_finite(v) for v in iv):
+    if iv is None or not all(finite_number(v) for v in iv):
         return f"interaction exponent {p:.2f} (no profile interval)"
     note = summary.get("interaction_exponent_note")
     if note:  # not bounded: what the quoted equation uses (afmlearn.identify.fixed_exponent)
@@ -187,12 +188,12 @@ def format_exponent(summary: dict[str, Any]) -> str:
         if best is not None and not iv[0] <= p <= iv[1]:
             txt += f"; the profile's best exponent is {best:.2f}, not the selected model's"
     cv = summary.get("interaction_exponent_cv_interval")
-    if cv is not None and all(_finite(v) for v in cv):
+    if cv is not None and all(finite_number(v) for v in cv):
         txt += (f"; cross-validated over set-points {cv[0]:.2f}-{cv[1]:.2f}"
                 + ("" if summary.get("interaction_exponent_cv_bounded") else " (NOT bounded)"))
     return txt
 
 
-def _finite(v: Any) -> bool:
+def finite_number(v: Any) -> bool:
     """A finite number (JSON turns NaN into None: a summary read back has None there)."""
-    return v is not None and math.isfinite(v)
+    return isinstance(v, int | float) and math.isfinite(v)
