@@ -520,6 +520,27 @@ class CurveFitter:
             return None
         return coef, decay
 
+    def _far_starts(self, x: NDArray[np.float64], params: list[Parameter], *,
+                    data: bool) -> list[tuple[float, float]]:
+        """Starts ``(coefficient, decay length)`` (encoded) of the far damping term: ``x``'s,
+        each of the coefficient's ``alternatives`` at ``x``'s decay (``FAR_DECAY_M``: 3e-4
+        k/omega0 over 500 nm, session 6's start), and, with ``data``, the far law read off the
+        approach (``_far_law_from_data``, session 7's start).
+
+        Both kinds are kept: the data's law alone (session 7) left the far term off on 12 of 45
+        Asylum On_Surface damping fits at 128-172 nm free amplitude, where it scored worse than
+        the term off and session 6's start found it (median held-out gain on the 172 nm curves
+        0.55 -> 0.32); the data's law is needed where the far loss decays over more than the
+        ramp (a 2-3 um decay on a 1.2 um ramp stalled from 500 nm)."""
+        idx = {p.field: 2 + i for i, p in enumerate(params)}
+        pc, pl = params[idx["far_damping"] - 2], params[idx["far_decay_length"] - 2]
+        c0, l0 = float(x[idx["far_damping"]]), float(x[idx["far_decay_length"]])
+        out = [(c0, l0)] + [(_enc(pc, a), l0) for a in pc.alternatives if _enc(pc, a) != c0]
+        far = self._far_law_from_data(x) if data else None
+        if far is not None:
+            out.append((_enc(pc, far[0]), _enc(pl, far[1])))
+        return out
+
     def _free_scale_start(self, x: NDArray[np.float64]) -> float:
         """Free-amplitude scale that makes the steady amplitude at the first rest gap 1 under
         the damping of ``x``: ``|1 - W**2 + i W (1/Q + g)| / |1 - W**2 + i W / Q|`` with
@@ -540,26 +561,30 @@ class CurveFitter:
         ``DELTA_REF``."""
         idx = {p.field: 2 + i for i, p in enumerate(params)}
         extra = [p for p in params if p.field not in ("vdw", "stiffness")]
-        choices = [[float(x[idx[p.field]])] + [_enc(p, a) for a in p.alternatives
-                                                if _enc(p, a) != float(x[idx[p.field]])]
-                   for p in extra]
+        # a free-amplitude scale not given by the start: the one that puts the model's
+        # amplitude at the ramp's start at 1 under each combination's damping
+        scale = FREE_SCALE in idx and FREE_SCALE not in (self.start or {})
+        # one choice per parameter (its values, encoded), the far term's coefficient and decay
+        # as one joint choice (``_far_starts``)
+        groups: list[tuple[tuple[str, ...], list[tuple[float, ...]]]] = []
+        for p in extra:
+            if p.field == "far_decay_length" and "far_damping" in idx:
+                continue
+            if p.field == "far_damping" and "far_decay_length" in idx:
+                groups.append((("far_damping", "far_decay_length"),
+                               self._far_starts(x, params, data=scale)))
+                continue
+            xi = float(x[idx[p.field]])
+            groups.append(((p.field,), [(xi,)] + [(_enc(p, a),) for a in p.alternatives
+                                                  if _enc(p, a) != xi]))
         # the exponent the given stiffness belongs to
         e0 = (self.start or {}).get("exponent", self._base.exponent)
-        # a free-amplitude scale not given by the start: the one that puts the model's
-        # amplitude at the ramp's start at 1 under each combination's damping; the far term's
-        # alternative start is then the far law read off the far part of the approach
-        scale = FREE_SCALE in idx and FREE_SCALE not in (self.start or {})
-        far = self._far_law_from_data(x) if scale and "far_decay_length" in idx else None
-        if far is not None:
-            k = [p.field for p in extra].index("far_damping")
-            choices[k] = [choices[k][0], _enc(params[idx["far_damping"] - 2], far[0])]
         out = []
-        for combo in itertools.product(*choices):
+        for combo in itertools.product(*(values for _, values in groups)):
             y = x.copy()
-            for p, v in zip(extra, combo, strict=True):
-                y[idx[p.field]] = v
-            if far is not None and y[idx["far_damping"]] != x[idx["far_damping"]]:
-                y[idx["far_decay_length"]] = _enc(params[idx["far_decay_length"] - 2], far[1])
+            for (fields, _), vals in zip(groups, combo, strict=True):
+                for f, v in zip(fields, vals, strict=True):
+                    y[idx[f]] = v
             if scale:
                 p = params[idx[FREE_SCALE] - 2]
                 y[idx[FREE_SCALE]] = _enc(p, min(max(self._free_scale_start(y), p.low),

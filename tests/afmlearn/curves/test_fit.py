@@ -250,12 +250,9 @@ def test_far_decay_start_is_a_physical_length():
         damping.in_units(0.0)
 
 
-def test_far_damping_is_found_at_a_large_free_amplitude():
+def _large_amplitude_curve():
     """A curve at 150 nm free amplitude (Q 187, ramp from 8 free amplitudes = 1.2 um) with a
-    far-field damping of 3e-4 k/omega0 decaying over 450 nm (the Asylum lever's far law,
-    docs/real_data.md): the damping fit finds the far term at its physical decay (measured
-    0.25e-3 over 330-490 nm, chi2 10095 -> 856-1068 on 300 residuals). A start at 20 free amplitudes
-    (3 um, session 4) left the term off (6.8e-8) and stretched the near one to 73 nm."""
+    far-field damping of 3e-4 k/omega0 decaying over 450 nm (the Asylum lever's far law)."""
     from afmlearn.curves.transfer import rescale_law
 
     length, q = 150e-9, 187.0
@@ -277,6 +274,16 @@ def test_far_damping_is_found_at_a_large_free_amplitude():
                           segment=(tau >= half).astype(np.int8), sample_rate_hz=rate,
                           quality_factor=q, spring_constant_n_per_m=2.7,
                           resonance_frequency_hz=72e3)
+    return curve
+
+
+def test_far_damping_is_found_at_a_large_free_amplitude():
+    """A curve at 150 nm free amplitude (Q 187, ramp from 8 free amplitudes = 1.2 um) with a
+    far-field damping of 3e-4 k/omega0 decaying over 450 nm (the Asylum lever's far law,
+    docs/real_data.md): the damping fit finds the far term at its physical decay (measured
+    0.25e-3 over 330-490 nm, chi2 10095 -> 856-1068 on 300 residuals). A start at 20 free amplitudes
+    (3 um, session 4) left the term off (6.8e-8) and stretched the near one to 73 nm."""
+    curve = _large_amplitude_curve()
     base = CurveFitter(max_evaluations=400).fit(curve)
     damping = next(h for h in EXTENSIONS if h.cause == "long_range_damping")
     fit = CurveFitter(hypothesis=damping, start=base.values_, max_evaluations=300).fit(curve)
@@ -337,3 +344,37 @@ def test_free_scale_finds_no_loss_where_there_is_none():
     assert np.all(np.abs(level - 1.0 / s) < 0.01)
     # nor does it fit the noise: at most a few chi2 units below the session-6 model's fit
     assert fit.chi2_ > fits[False].chi2_ - 15.0
+
+
+def test_far_starts_keep_the_fixed_start_and_the_data_read_law():
+    """The far term's starts are x's (off), session 6's (3e-4 k/omega0 over 500 nm) and the
+    law read off the far approach: the data's law alone left the far term off on 12 large
+    amplitude Asylum On_Surface fits (session 7), session 6's alone cannot reach decays longer
+    than the ramp. Each start comes with every combination of the other parameters."""
+    from afmlearn.curves.hypotheses import FAR_DECAY_M, FAR_OFF
+
+    curve = _large_amplitude_curve()
+    damping = next(h for h in EXTENSIONS if h.cause == "long_range_damping")
+    fit = CurveFitter(hypothesis=damping, start={"vdw": 1e-5, "stiffness": 20.0},
+                      rescales=((1.0, 1.0),), max_evaluations=2).fit(curve)
+    params = fit._params
+    idx = {p.field: 2 + i for i, p in enumerate(params)}
+    x = np.array([1.3, 1.0] + [math.log10(p.init) if p.log else p.init for p in params])
+    lu = curve.length_m
+    starts = [(10.0 ** c, 10.0 ** d * lu) for c, d in fit._far_starts(x, params, data=True)]
+    assert len(starts) == 3
+    assert starts[0] == pytest.approx((FAR_OFF, FAR_DECAY_M), rel=1e-9)
+    assert starts[1] == pytest.approx((3e-4, FAR_DECAY_M), rel=1e-9)
+    # the law read off the points beyond 2 free amplitudes (300 nm) shows the truth's loss
+    # there (measured: 0.89x at 300 nm, decay 326 nm; a start, the decay trades with the scale)
+    coef, decay = starts[2]
+    assert coef * math.exp(-300e-9 / decay) == pytest.approx(3e-4 * math.exp(-300 / 450), rel=0.25)
+    assert 0.5 < decay / 450e-9 < 2.0
+    # without the data: x's and session 6's
+    assert len(fit._far_starts(x, params, data=False)) == 2
+    # every far start, at its own decay, combined with the near term's 2 x 3 starts
+    cands = fit._rescaled(x, params, with_identity=True)
+    pairs = {(round(c[idx["far_damping"]], 9), round(c[idx["far_decay_length"]], 9))
+             for c in cands}
+    assert pairs == {(round(c, 9), round(d, 9)) for c, d in fit._far_starts(x, params, data=True)}
+    assert len(cands) == 2 * 3 * 3
