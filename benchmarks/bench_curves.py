@@ -539,9 +539,52 @@ def group_section(recs: list[dict], args, oracles: dict | None = None) -> str:
         f"{fmt(np.nanmedian(rj))} x the Katan/Payam SJ inversion's (median over curves), "
         f"<= 0.5 x on {100 * np.mean(rj[np.isfinite(rj)] <= 0.5):.0f} % (single: "
         f"{fmt(np.nanmedian(rs_single))} x)."]
+    misses = [miss_class(r, oracles.get((r["cause"], r["index"]))) for r in recs
+              if r["named_joint"] != r["cause"]]
+    if misses:
+        text += ["", "Misses (joint): " + "; ".join(misses) + "."]
     if args.note:
         text += ["", args.note]
     return "\n".join(text)
+
+
+#: evidence (BIC units) above which a cause can be named (GroupDiagnoser's default threshold)
+NAMING_THRESHOLD = 10.0
+
+
+def miss_class(rec: dict, oracle: dict | None) -> str:
+    """Why a group's joint diagnosis missed its cause, in one phrase.
+
+    ``invisible``: the true law's own joint evidence (oracle) is at most the naming threshold,
+    whatever the optimiser does (only when the truth-started fit reaches the baseline's chi2:
+    else the oracle is a lower bound and says nothing); ``fit``: the fitted extension of the
+    true cause stays at or below the threshold although the truth is above it (or, without an
+    informative oracle, below it: fit or invisible); ``decision``: the true cause's fitted
+    evidence is above the threshold but its left-out gain refutes it (<= 0) or another
+    eligible cause has more evidence.
+    """
+    cause = rec["cause"]
+    cand = next((c for c in rec["candidates_joint"] if c["cause"] == cause), None)
+    ev_o = None if oracle is None else oracle.get("evidence")
+    head = f"{cause} #{rec['index']} named {rec['named_joint']}"
+    if cand is None:  # ``none`` named something: a false positive
+        top = rec["candidates_joint"][0]
+        return (f"{head} (false positive: evidence {fmt(top['evidence'])}, left-out gain "
+                f"{fmt(top['gain'])})")
+    ev, gain = cand["evidence"], cand["gain"]
+    what = f"evidence {fmt(ev)}, left-out gain {fmt(gain) if gain is not None else 'n/a'}"
+    truth = "" if ev_o is None else f", truth {fmt(ev_o)}"
+    if ev_o is not None and oracle["chi2_truth"] > oracle["chi2_baseline"]:
+        # the extension nests the baseline: a truth-started fit above the fitted baseline is
+        # not at its optimum, its evidence only a lower bound that cannot say "invisible"
+        ev_o, truth = None, f", truth-started fit stuck at {fmt(oracle['evidence'])}"
+    if ev_o is not None and ev_o <= NAMING_THRESHOLD and ev <= NAMING_THRESHOLD:
+        return f"{head}: invisible ({what}{truth})"
+    if ev <= NAMING_THRESHOLD:
+        kind = "fit" if ev_o is not None else "fit or invisible"
+        return f"{head}: {kind} ({what}{truth})"
+    why = "refuted" if gain is not None and gain <= 0.0 else "outranked"
+    return f"{head}: decision, {why} ({what}{truth})"
 
 
 def run_groups(args, info: dict) -> int:
