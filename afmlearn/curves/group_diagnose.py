@@ -300,8 +300,10 @@ def starts_from_singles(diagnosers: Sequence[CurveDiagnoser]) -> dict[str, list[
         starts = []
         for f, c in zip(fits, curves, strict=True):
             law = rescale_law(f.law_, c.length_m / length)
+            # the free-amplitude scale is a single-curve nuisance the joint fit holds at 1
             starts.append({"law": {k: getattr(law, k) for k in f.values_
-                                   if k not in (OFFSET, OMEGA, DRIFT)}, "curves": nuis,
+                                   if k not in (OFFSET, OMEGA, DRIFT, FREE_SCALE)},
+                           "curves": nuis,
                            "length_m": length})
         out[cause] = starts
     return out

@@ -207,3 +207,35 @@ def test_a_flat_curve_keeps_its_surface_out_of_reach():
     assert offset_guess(flat) + 0.6 < closest - 0.8
     touching = synthetic(DAMPED, 20e-9, 1.0, n=60)
     assert offset_guess(touching) == pytest.approx(1.0, abs=0.1)
+
+
+def test_starts_from_singles_leave_out_the_single_curve_free_scale():
+    """A single-curve damping fit carries the free-amplitude scale, a nuisance of that curve
+    the joint fit holds at 1: the joint starts hold the law only, rescaled to the group unit
+    (it raised AttributeError, CurveLaw has no free_scale: F, session 8)."""
+    from types import SimpleNamespace
+
+    from afmlearn.curves.group import group_length
+    from afmlearn.curves.group_diagnose import starts_from_singles
+
+    curves = [synthetic(DAMPED, L, 1.0, n=20) for L in (15e-9, 40e-9)]
+    diags = []
+    for c in curves:
+        law = rescale_law(DAMPED, L1 / c.length_m).replace(far_damping=3e-4, far_decay_length=5.0)
+        values = {"offset": 1.0, "omega": 1.0, "free_scale": 1.1}
+        values.update({k: getattr(law, k) for k in ("vdw", "stiffness", "damping",
+                                                    "decay_length", "far_damping",
+                                                    "far_decay_length")})
+        fit = SimpleNamespace(values_=values, law_=law)
+        base = SimpleNamespace(values_={k: values[k] for k in ("offset", "omega", "vdw",
+                                                               "stiffness")}, law_=law)
+        diags.append(SimpleNamespace(curve_=c, fits_={"long_range_damping": fit},
+                                     baseline_=base))
+    starts = starts_from_singles(diags)
+    length = group_length(curves)
+    for s in starts["long_range_damping"]:
+        assert "free_scale" not in s["law"]
+        assert s["curves"] == [{"offset": 1.0, "omega": 1.0}] * 2
+        # the same SI law in the group unit: the near decay is 0.2 x 20 nm
+        assert s["law"]["decay_length"] * length == pytest.approx(0.2 * L1, rel=1e-12)
+        assert s["law"]["damping"] == pytest.approx(DAMPED.damping, rel=1e-12)
