@@ -42,7 +42,6 @@ from afmlearn.curves import (  # noqa: E402
     CurveFitter,
     CurveLaw,
 )
-from afmlearn.curves.hypotheses import FREE_SCALE  # noqa: E402
 from afmlearn.metrics import nrmse  # noqa: E402
 from benchmarks.peer_inversion import hoelscher, sader_jarvis_katan  # noqa: E402
 from simulator import RK4, Cantilever, Scales, System, TipExcitation  # noqa: E402
@@ -426,20 +425,6 @@ def _curve_of(data: dict) -> Curve:
                          spring_constant_n_per_m=K, resonance_frequency_hz=F0)
 
 
-def _without_free_scale(diag: CurveDiagnoser) -> SimpleNamespace:
-    """``diag`` as :func:`starts_from_singles` reads it, without the single-curve fitted
-    free-amplitude scale (``free_scale``, of the long-range-damping fit since f4603da): it is
-    not a law field and the joint fit does not fit it; passed through, the library's
-    ``starts_from_singles`` raises AttributeError (reported to helper A, session 8)."""
-
-    def strip(f: CurveFitter) -> SimpleNamespace:
-        return SimpleNamespace(law_=f.law_, values_={k: v for k, v in f.values_.items()
-                                                     if k != FREE_SCALE})
-
-    return SimpleNamespace(curve_=diag.curve_, baseline_=strip(diag.baseline_),
-                           fits_={c: strip(f) for c, f in diag.fits_.items()})
-
-
 def run_group(job: dict) -> dict:
     """One group: N curves of one tip (same force law and ramp draws, free amplitudes spread
     over ``GROUP_FREE``), each diagnosed alone, then all jointly (seeded by the single fits).
@@ -458,7 +443,7 @@ def run_group(job: dict) -> dict:
     t_single = time.perf_counter() - t0
     t1 = time.perf_counter()
     joint = GroupDiagnoser(lockin=lockin, max_evaluations=job["joint_evaluations"]).fit(
-        curves, extra_starts=starts_from_singles([_without_free_scale(d) for d in singles]))
+        curves, extra_starts=starts_from_singles(singles))
     t_joint = time.perf_counter() - t1
     ext = joint.extended_
     members = []
