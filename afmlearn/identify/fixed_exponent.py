@@ -33,10 +33,10 @@ from typing import TYPE_CHECKING, Any, final
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import minimize_scalar
 
 from .joint_outputs import finite_number
 from .library import AFMLibrary, Indentation
+from .line_search import grid_then_bounded
 from .model import IdentifiedModel
 
 if TYPE_CHECKING:
@@ -165,15 +165,7 @@ def _best_a0(cost: Any, lo: float, hi: float, hint: float, n: int = 10) -> float
     """``a0`` minimising ``cost`` over a geometric grid plus ``hint``, then refined between
     the best point's neighbours (the exponent profiles' own search)."""
     grid = np.unique(np.concatenate([np.geomspace(lo, hi, n), [hint]]))
-    vals = np.array([cost(float(a)) for a in grid])
-    i = int(np.argmin(vals))
-    best_a, best = float(grid[i]), float(vals[i])
-    if 0 < i < grid.size - 1 and math.isfinite(best):
-        res = minimize_scalar(cost, bounds=(float(grid[i - 1]), float(grid[i + 1])),
-                              method="bounded", options={"maxiter": 8})
-        if res.fun < best:
-            best_a = float(res.x)
-    return best_a
+    return grid_then_bounded(cost, grid, maxiter=8)[0]
 
 
 _Refit = tuple[IdentifiedModel | None, float, str, "dict[str, FloatArray] | None", str]

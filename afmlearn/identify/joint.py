@@ -42,6 +42,7 @@ from scipy.optimize import minimize, minimize_scalar
 
 from .drive import AbstractDrivePhase, RecordedPhase
 from .library import AFMLibrary, ExponentialDamping, Indentation, IndentationRate, InversePower
+from .line_search import grid_then_bounded
 from .output_error import OutputErrorResult, OutputErrorStage, covariance_samples
 from .problem import JointDesign, JointProblem
 from .selection import Candidate, best_by_ic, knee_one_se, profile_interval
@@ -197,17 +198,9 @@ class ContactOnsetProfile:
     def run(self, problem: JointProblem, library: AFMLibrary) -> tuple[float, FloatArray]:
         lo, hi = problem.a0_range
         grid = np.geomspace(lo, hi, self.n_a0)
-        prof = np.array([(a, short_model(problem, library, float(a), self.max_terms)[1])
-                         for a in grid])
-        i = int(np.nanargmin(prof[:, 1]))
-        best = float(prof[i, 0])
-        if 0 < i < grid.size - 1:
-            res = minimize_scalar(lambda a: short_model(problem, library, a, self.max_terms)[1],
-                                  bounds=(float(grid[i - 1]), float(grid[i + 1])),
-                                  method="bounded", options={"maxiter": 5})
-            if res.fun < prof[i, 1]:
-                best = float(res.x)
-        return best, prof
+        best, _, vals = grid_then_bounded(
+            lambda a: short_model(problem, library, a, self.max_terms)[1], grid, maxiter=5)
+        return best, np.column_stack([grid, vals])
 
 
 def _conservative_phase(problem: JointProblem, i: int, near: float) -> float | None:
@@ -439,15 +432,8 @@ class ExponentProfile:
         lp = lib.replace(j, Indentation(float(p)))
         lo, hi = problem.a0_range
         grid = np.unique(np.concatenate([np.geomspace(lo, hi, self.n_a0), [a0_hint]]))
-        vals = np.array([support_fit(problem, lp, float(a))[1] for a in grid])
-        i = int(np.argmin(vals))
-        best_a, best = float(grid[i]), float(vals[i])
-        if 0 < i < grid.size - 1 and math.isfinite(best):
-            res = minimize_scalar(lambda a: support_fit(problem, lp, a)[1],
-                                  bounds=(float(grid[i - 1]), float(grid[i + 1])),
-                                  method="bounded", options={"maxiter": 8})
-            if res.fun < best:
-                best_a, best = float(res.x), float(res.fun)
+        best_a, best, _ = grid_then_bounded(lambda a: support_fit(problem, lp, a)[1], grid,
+                                            maxiter=8)
         pr = problem
         if self.offsets and math.isfinite(best):
             # the orbits' offsets re-fitted at this exponent (they trade with it)

@@ -36,7 +36,7 @@ from typing import Any, final
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import minimize, minimize_scalar
+from scipy.optimize import minimize
 
 from afmlearn.metrics import nrmse
 from afmlearn.preprocess import fit_harmonics
@@ -51,6 +51,7 @@ from .library import (
     InversePower,
     SphereElectrostatic,
 )
+from .line_search import grid_then_bounded
 from .model import IdentifiedModel
 from .problem import JointDesign
 from .selection import Candidate, GridSearch, best_by_ic, knee_one_se, merge_supports
@@ -92,14 +93,7 @@ def profile_fixed(problem: OrbitProblem, lib: AFMLibrary, a0: float, n: int = 40
         return problem.support_rss(lib, a)
 
     grid = np.unique(np.concatenate([np.geomspace(lo, hi, n), [a0]]))
-    vals = np.array([rss(a) for a in grid])
-    i = int(np.argmin(vals))
-    if 0 < i < grid.size - 1:
-        res = minimize_scalar(rss, bounds=(grid[i - 1], grid[i + 1]), method="bounded",
-                              options={"xatol": 1e-4 * (hi - lo), "maxiter": 15})
-        if res.fun < vals[i]:
-            return float(res.x)
-    return float(grid[i])
+    return grid_then_bounded(rss, grid, maxiter=15, xatol=1e-4 * (hi - lo))[0]
 
 
 def orbit_model(problem: OrbitProblem, library: AFMLibrary, a0: float, coef: FloatArray, *,
@@ -165,16 +159,9 @@ class OrbitOnsetProfile:
         def objective(a: float) -> float:
             return short_models(problem, library, float(a), self.max_terms)[1]
 
-        prof = np.array([(a0, objective(float(a0))) for a0 in grid])
-        i = int(np.nanargmin(prof[:, 1]))
-        best = float(prof[i, 0])
-        if 0 < i < len(grid) - 1:
-            res = minimize_scalar(objective, bounds=(float(grid[i - 1]), float(grid[i + 1])),
-                                  method="bounded",
-                                  options={"xatol": 1e-4 * problem.orbit_span, "maxiter": 10})
-            if res.fun < prof[i, 1]:
-                best = float(res.x)
-        return best, prof
+        best, _, vals = grid_then_bounded(objective, grid, maxiter=10,
+                                          xatol=1e-4 * problem.orbit_span)
+        return best, np.column_stack([grid, vals])
 
 
 def _conservative_phases(problem: OrbitProblem, fc: float) -> list[float]:
