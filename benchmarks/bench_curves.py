@@ -65,15 +65,24 @@ A0 = 0.3e-9
 BANDWIDTH_HZ = 1000.0
 #: uniform turning-point grid of the peer inversions (about 3 curve points per bin)
 PEER_BINS = 50
+#: lower turning point at the ramp's start (/ L_REF): 10 nm from the surface. Not free for a
+#: strong electrostatic tail at a small free amplitude (session 8: at 8 nm free amplitude the
+#: amplitude there is 16 % below free and the phase 35 deg off), which breaks the fit's
+#: contract that the ramp's far end is free (``--lead-in``)
+LEAD_IN = 1.0
 
 
 def make_case(cause: str, index: int, seed: int, periods: float, every: int, *,
-              free_amplitude: float | None = None, member: int = 0) -> dict:
+              free_amplitude: float | None = None, member: int = 0,
+              lead_in: float = LEAD_IN) -> dict:
     """Simulate one curve; returns the analysis input and the truth (kept apart).
 
     ``free_amplitude`` (/ ``L_REF``) replaces the drawn one (every other draw is unchanged:
     the same tip and sample) and ``member`` != 0 changes only the noise seed: the curves of
-    one tip at several free amplitudes (``--group``)."""
+    one tip at several free amplitudes (``--group``). The ramp starts with its lower turning
+    point ``lead_in`` (/ ``L_REF``) from the surface; a longer lead-in than ``LEAD_IN`` adds
+    drive periods in proportion (same ramp speed: the same curve with a longer free part in
+    front)."""
     rng = np.random.default_rng([seed, CAUSES.index(cause), index])
     sc = Scales(K, F0, L_REF)
     ham = rng.uniform(0.5, 1.5) * 1e-19
@@ -103,8 +112,7 @@ def make_case(cause: str, index: int, seed: int, periods: float, every: int, *,
         force = DMT.from_si(**base)
         if cause == "drift":
             # 0.5--1.5 nm over the whole ramp, either way
-            total = rng.uniform(0.5, 1.5) * rng.choice([-1.0, 1.0]) * 1e-9 / L_REF
-            drift = total / (2.0 * periods * 2.0 * math.pi)
+            drift = rng.uniform(0.5, 1.5) * rng.choice([-1.0, 1.0]) * 1e-9 / L_REF
     free = rng.uniform(1.5, 3.0)  # free amplitude 15--30 nm
     if free_amplitude is not None:
         free = float(free_amplitude)
@@ -113,7 +121,9 @@ def make_case(cause: str, index: int, seed: int, periods: float, every: int, *,
     dt_out = every * 2.0 * math.pi
     lockin = LockIn(bandwidth=BANDWIDTH_HZ / F0, order=4, output_interval=dt_out)
     gap_end = free * rng.uniform(0.25, 0.45)
-    scen = LockInCurve(gap_start=free + 1.0, gap_end=gap_end, n_periods=periods,
+    periods *= (free + lead_in - gap_end) / (free + LEAD_IN - gap_end)
+    drift /= 2.0 * periods * 2.0 * math.pi  # the drawn total over the whole ramp
+    scen = LockInCurve(gap_start=free + lead_in, gap_end=gap_end, n_periods=periods,
                        lockin=lockin, amplitude_noise=0.01, phase_noise=math.radians(0.5),
                        drift=drift, seed=(int(rng.integers(2**31)) + 7919 * member) % 2**31,
                        samples_per_period=40,
@@ -370,6 +380,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="--group: curve evaluations of each joint diagnosis")
     ap.add_argument("--free-span", default=",".join(f"{f:g}" for f in GROUP_FREE),
                     help="--group: smallest and largest free amplitude of a group (/ 10 nm)")
+    ap.add_argument("--lead-in", type=float, default=LEAD_IN,
+                    help="--group: lower turning point at the ramp's start (/ 10 nm); a longer "
+                         "one adds periods in proportion (same ramp speed)")
     add_doc_flag(ap)
     args = ap.parse_args(argv)
     info = machine_info()
@@ -434,7 +447,8 @@ def run_group(job: dict) -> dict:
     n = job["group"]
     frees = np.linspace(*job.get("free_span", GROUP_FREE), n)
     cases = [make_case(job["cause"], job["index"], job["seed"], job["periods"], job["every"],
-                       free_amplitude=float(f), member=m) for m, f in enumerate(frees)]
+                       free_amplitude=float(f), member=m,
+                       lead_in=job.get("lead_in", LEAD_IN)) for m, f in enumerate(frees)]
     curves = [_curve_of(c["data"]) for c in cases]
     lockin = cases[0]["truth"]["lockin"]
     t0 = time.perf_counter()
@@ -509,10 +523,15 @@ def group_section(recs: list[dict], args, oracles: dict | None = None) -> str:
             "single fits per group [s]", "joint fit [s]", "joint named as"]
     loads = [r["load"] for r in recs if r.get("load") is not None]
     rj = np.array(rs_joint, dtype=float)
+    lead = ("" if args.lead_in == LEAD_IN else
+            f" (the ramp starts with the lower turning point "
+            f"{args.lead_in * 10:g} nm from the surface instead of {LEAD_IN * 10:g} nm; periods "
+            "added in proportion)")
     text = [
         f"{len(recs)} groups of {args.group} curves of one tip (same force law and ramp, free "
         f"amplitudes {args.span[0] * 10:g}--{args.span[1] * 10:g} nm evenly spread, noise "
-        f"seeds differ), {args.periods:g} drive periods per ramp, 1 % amplitude and 0.5 deg "
+        f"seeds differ), {args.periods:g} drive periods per ramp{lead}, 1 % amplitude and "
+        "0.5 deg "
         f"phase noise, lever as the single-curve section. Single: `CurveDiagnoser` per curve "
         f"(max_evaluations {args.max_evaluations}); joint: `GroupDiagnoser` "
         f"(max_evaluations {args.joint_evaluations}, seeded by the single fits), gain = "
@@ -584,7 +603,8 @@ def run_groups(args, info: dict) -> int:
     def same(r: dict) -> bool:  # records of this setting (older records: the default span)
         return (r["seed"] == args.seed and r["periods"] == args.periods
                 and r["group"] == args.group
-                and tuple(r.get("free_span", GROUP_FREE)) == args.span)
+                and tuple(r.get("free_span", GROUP_FREE)) == args.span
+                and (r.get("lead_in") or LEAD_IN) == args.lead_in)
 
     done = {(r["cause"], r["index"], r["group"]) for r in load(path) if same(r)}
     causes = args.causes.split(",")
@@ -594,7 +614,7 @@ def run_groups(args, info: dict) -> int:
             job = {"cause": str(c), "index": i, "seed": args.seed, "periods": args.periods,
                    "every": args.every, "max_evaluations": args.max_evaluations,
                    "group": args.group, "joint_evaluations": args.joint_evaluations,
-                   "free_span": list(args.span)}
+                   "free_span": list(args.span), "lead_in": args.lead_in}
             if args.report_only or (job["cause"], i, args.group) in done:
                 continue
             rec = run_group(job)
@@ -619,9 +639,11 @@ def run_groups(args, info: dict) -> int:
     oracles = {(o["cause"], o["index"]): o for o in load(opath) if same(o)}
     # another amplitude span gets its own section (the default span's results stay)
     wide = args.span != GROUP_FREE
-    write_section("curve_groups_wide" if wide else "curve_groups",
+    lead = args.lead_in != LEAD_IN
+    write_section("curve_groups" + ("_wide" if wide else "") + ("_lead" if lead else ""),
                   "Lock-in curves: joint fit across free amplitudes vs single curves "
-                  f"(`bench_curves.py --group`{' --free-span' if wide else ''})",
+                  f"(`bench_curves.py --group`{' --free-span' if wide else ''}"
+                  f"{' --lead-in' if lead else ''})",
                   group_section(recs, args, oracles), info, write=not args.no_doc)
     return 0
 
@@ -637,9 +659,10 @@ def group_oracle(job: dict) -> dict:
     n = job["group"]
     frees = np.linspace(*job.get("free_span", GROUP_FREE), n)
     cases = [make_case(job["cause"], job["index"], job["seed"], job["periods"], job["every"],
-                       free_amplitude=float(f), member=m) for m, f in enumerate(frees)]
+                       free_amplitude=float(f), member=m,
+                       lead_in=job.get("lead_in", LEAD_IN)) for m, f in enumerate(frees)]
     curves = [_curve_of(c["data"]) for c in cases]
-    keys = ("cause", "index", "seed", "periods", "group", "free_span")
+    keys = ("cause", "index", "seed", "periods", "group", "free_span", "lead_in")
     out = {k: job.get(k) for k in keys}
     vals = [truth_values(job["cause"], c["truth"], c["data"], cv)
             for c, cv in zip(cases, curves, strict=True)]
