@@ -149,6 +149,20 @@ class AbstractHypothesis(abc.ABC):
         an optional ``"text"`` appended to the evidence line. Default: nothing."""
         return {}
 
+    def heldout_gain(self, held: Sequence[Any], *, before: str, after: str,
+                     model: DiagnosisModel) -> float | None:
+        """The extension's held-out gain on whole set-points held out, measured on its own
+        signature, in place of the NRMSE gain ``1 - median NRMSE(after) / median
+        NRMSE(before)``; None (the default) keeps the NRMSE gain.
+
+        For a cause whose signature is far smaller than the error of a set-point's
+        fundamental predicted at a gap never fitted (e.g. a second mode at one harmonic).
+        ``held``: the diagnoser's :class:`~afmlearn.diagnose.heldout.HeldOut` per observation
+        (``simulated[before]`` and ``simulated[after]`` where held out); ``model``: the
+        extension at the representative observation.
+        """
+        return None
+
     def evidence(self, model: DiagnosisModel, *, delta_chi2: float, gain: float,
                  energy: NDArray[np.float64] | None = None) -> str:
         """One line: what the fitted extension says physically, and how strongly.
