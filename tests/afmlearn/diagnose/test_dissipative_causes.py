@@ -17,7 +17,7 @@ import pytest
 from afmlearn.diagnose import Diagnoser
 from afmlearn.diagnose.balance import Solution
 from afmlearn.diagnose.diagnoser import tie_margin
-from afmlearn.diagnose.fit import energy_starts
+from afmlearn.diagnose.fit import energy_starts, fit_baseline, fit_extension, phase_starts
 from afmlearn.diagnose.hypotheses import AdhesionHysteresis, LongRangeDamping, Viscoelastic
 from afmlearn.diagnose.hypotheses.base import Context
 from afmlearn.diagnose.synthetic import SeriesCase, simulate_series
@@ -101,6 +101,48 @@ def test_energy_balance_finds_the_decay_length(constructed):
     for s, zb in zip(first, scanned, strict=True):
         j = s.spec.term_keys().index("damping")
         assert s.coef[3 + j] < 0, (zb, s.coef)
+
+
+def test_phase_starts_adds_the_recorded_phases_only_when_they_differ():
+    """``fit.phase_starts``: the base model's phases, plus the recorded ones (the priors'
+    means) when every observation has one and one differs by more than ``tol`` (mod 2 pi)."""
+    base = Solution(spec=None, coef=np.zeros(3), residual=np.zeros(1), chi2=1.0, values=(),
+                    phases=(0.1, -3.0))
+
+    class _Joint:
+        def __init__(self, priors):
+            self.phase_priors = priors
+
+    assert phase_starts(_Joint([None, (-3.0, 0.02)]), base) == [(0.1, -3.0)]
+    # 2 pi apart is the same phase
+    assert phase_starts(_Joint([(0.1 + 2 * np.pi, 0.02), (-3.0, 0.02)]), base) == [(0.1, -3.0)]
+    assert phase_starts(_Joint([(0.1, 0.02), (-2.5, 0.02)]), base) == [(0.1, -3.0),
+                                                                         (0.1, -2.5)]
+
+
+def test_extension_grid_starts_from_the_recorded_phases(constructed):
+    """Known answer of the equation-error start (``fit.fit_extension``) of the damping term:
+    the drawn decay length (5 nm) and onset (0.3 nm). A conservative baseline can balance the
+    drive's energy only by shifting the drive phases (here by more than 0.5 rad from the
+    recorded ones, prior SD 0.02 rad), and from its phases the grid put the damping at 13 nm
+    and ``a0`` at 1.1 nm (equation error 30,960; measured before the fix); from the recorded
+    phases it is at the drawn law (163). Session 8: on seed-2026 damping series the damping
+    fits ended 600-11,000 above the drawn law refitted for this reason."""
+    dg = constructed("long_range_damping")
+    _, ctx = _conservative_point(dg, "long_range_damping")
+    jb = dg._jb
+    base = fit_baseline(jb, ctx)
+    recorded = np.array([p[0] for p in jb.phase_priors])
+    off = np.abs(np.angle(np.exp(1j * (np.asarray(base.phases) - recorded))))
+    assert off.max() > 0.5, off             # the premise: the baseline's phases moved off
+    assert len(phase_starts(jb, base)) == 2
+    start = fit_extension(jb, base, LongRangeDamping(), ctx, n_starts=2, max_nfev=60)[0]
+    a0_m, decay_m = (v * ctx.length_m for v in start.values)
+    assert 4e-9 < decay_m < 6.5e-9, decay_m
+    assert 0.2e-9 < a0_m < 0.45e-9, a0_m
+    keys = start.spec.term_keys()
+    assert start.coef[3 + keys.index("damping")] < 0
+    assert start.coef[3 + keys.index("contact")] > 0
 
 
 def test_damping_out_of_contact_is_not_named_viscoelastic(constructed):
