@@ -82,12 +82,13 @@ from .observation import (
     folds,
 )
 from .output_error import OutputError
+from .ties import HELDOUT_ALPHA, TIE_SD, Tie, chi2_difference_sd, heldout_sign_test
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["Diagnoser", "NullCalibration", "Candidate", "Step", "HeldOut",
-           "ObservationResult", "Removal", "backward_eliminate", "name_cause",
-           "null_kind", "tie_margin"]
+           "ObservationResult", "Removal", "Tie", "backward_eliminate", "name_cause",
+           "not_separated", "null_kind", "tie_margin"]
 
 FloatArray = NDArray[np.float64]
 
@@ -221,6 +222,8 @@ class Step:
     candidates: list[Candidate]
     #: the backward check of this cause in the final model (None: not checked)
     removal: Removal | None = None
+    #: candidates of this step the data do not separate from it (:mod:`.ties`)
+    ties: list[Tie] = field(default_factory=list)
 
 
 @final
@@ -614,7 +617,8 @@ class Diagnoser:
             idx, conf = name_cause(
                 [c.delta_chi2 for c in cands], [c.gain for c in cands],
                 [c.threshold for c in cands], calib.min_gain,
-                heldout=None if single else [c.heldout_nrmse for c in cands])
+                heldout=None if single else [c.heldout_nrmse for c in cands],
+                chi2_sd=None if single else _sd_matrix(cands))
             if first is None:
                 first, conf0 = cands, conf
             if idx is None:
@@ -622,7 +626,11 @@ class Diagnoser:
             c = cands[idx]
             steps.append(Step(cause=c.cause, gain=c.gain, evidence=c.evidence,
                               delta_chi2=c.delta_chi2, threshold=c.threshold, confidence=conf,
-                              candidates=cands))
+                              candidates=cands,
+                              ties=[] if single else not_separated(cands, idx,
+                                                                   calib.min_gain)))
+            for t in steps[-1].ties:
+                self._log(f"  {t.text(c.cause)}")
             before.append(current)
             changes.append(_change(current.sol.spec, fits[idx].sol.spec))
             current = fits[idx]
@@ -655,6 +663,10 @@ class Diagnoser:
                 conf0 = _none_weight(first or [], calib.min_gain)
             elif steps[0].cause != first_cause:
                 conf0 = steps[0].confidence
+        elif stale and steps:
+            # one cause named, and its model converged for a further step that named nothing:
+            # gain_ is read from the model reported, so its held-out NRMSE is measured again
+            current.nrmse[:] = self._heldout(current)
         self.candidates_ = first or []
         self.causes_ = steps
         self.cause_ = steps[0].cause if steps else "none"
@@ -733,7 +745,9 @@ class Diagnoser:
                           f"{g:+.3f}")
                 return float(g) if math.isfinite(g) else -math.inf
 
-            return rise, gain
+            # the final model's misfit scale: chi2 per residual row (>> 1 when a cause in it
+            # is wrong; backward.overwhelming)
+            return rise, gain, float(fin.sol.chi2) / max(int(np.size(fin.sol.residual)), 1)
 
         def accept(i: int) -> None:
             state["final"] = pending[i]
@@ -744,6 +758,9 @@ class Diagnoser:
             accept)
         for d in dropped:
             self._log(f"  backward: dropped {d.cause}: {d.reason}")
+        for j in kept:
+            if last[j].note:
+                self.warnings_.append(f"backward check: {steps[j].cause} {last[j].note}")
         self.dropped_causes_ = dropped
         fin = state["final"]
         if not kept:
@@ -1049,6 +1066,11 @@ class Diagnoser:
             c.nrmse_per_observation = f.nrmse
             c.heldout_nrmse = _typical(f.nrmse)
             g = 1.0 - c.heldout_nrmse / _typical(current.nrmse)
+            # a cause may measure its gain on its own signature (a second mode: the harmonics
+            # next to f2, which the fundamental's error at an unseen gap would swamp)
+            own = h.heldout_gain(self._held, before=current.key, after=f.key, model=c.model)
+            if own is not None and self.design_ != "tail":
+                g = own
             c.gain = float(g) if math.isfinite(g) else -math.inf
             c.significant = bool(c.delta_chi2 > c.threshold and c.gain > calib.min_gain)
             c.evidence = self._evidence_text(h, c, self._energies[id(c)])
@@ -1247,19 +1269,59 @@ def _typical(a: FloatArray) -> float:
     return float(np.median(a)) if a.size else math.nan
 
 
-def tie_margin(delta_chi2: float) -> float:
+def tie_margin(delta_chi2: float, chi2_sd: float = math.nan) -> float:
     """Penalised-evidence difference below which two candidates are a tie on set-point series
-    (``TIE_CHI2``, ``TIE_FRACTION``)."""
-    return max(TIE_CHI2, TIE_FRACTION * float(delta_chi2))
+    (``TIE_CHI2``, ``TIE_FRACTION``), widened to ``TIE_SD`` standard deviations of their chi2
+    difference under a new noise draw when it is known (``chi2_sd``, :mod:`.ties`)."""
+    m = max(TIE_CHI2, TIE_FRACTION * float(delta_chi2))
+    return max(m, TIE_SD * float(chi2_sd)) if math.isfinite(chi2_sd) else m
+
+
+def _sd(a: Candidate, b: Candidate) -> float:
+    return chi2_difference_sd(a.solution.residual, b.solution.residual)
+
+
+def _sd_matrix(cands: Sequence[Candidate]) -> FloatArray:
+    """:func:`~afmlearn.diagnose.ties.chi2_difference_sd` of every pair of candidates."""
+    n = len(cands)
+    out = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i + 1, n):
+            out[i, j] = out[j, i] = _sd(cands[i], cands[j])
+    return out
 
 
 def _tied(top: Candidate, c: Candidate) -> bool:
-    return top.score - c.score <= tie_margin(top.delta_chi2)
+    return top.score - c.score <= tie_margin(top.delta_chi2, _sd(top, c))
+
+
+def not_separated(cands: Sequence[Candidate], idx: int, min_gain: float) -> list[Tie]:
+    """The significant candidates the data do not separate from the named one ``cands[idx]``
+    (set-point series): within the naming rule's tie margin of it in either direction
+    (:func:`tie_margin` with their chi2 noise) and not separated by the held-out set-points
+    either (two-sided sign test at ``HELDOUT_ALPHA``, :func:`~afmlearn.diagnose.ties.
+    heldout_sign_test`; no held-out comparison counts as not separated)."""
+    top = cands[idx]
+    out = []
+    for j, c in enumerate(cands):
+        if j == idx or not (c.delta_chi2 > c.threshold and c.gain > min_gain):
+            continue
+        sd = _sd(top, c)
+        if abs(top.score - c.score) > tie_margin(max(top.delta_chi2, c.delta_chi2), sd):
+            continue
+        k, n, p = heldout_sign_test(top.nrmse_per_observation, c.nrmse_per_observation)
+        if p < HELDOUT_ALPHA:
+            continue
+        out.append(Tie(cause=c.cause, delta_chi2=float(c.delta_chi2),
+                       named_delta_chi2=float(top.delta_chi2), chi2_sd=sd,
+                       heldout_nrmse=float(c.heldout_nrmse),
+                       named_heldout_nrmse=float(top.heldout_nrmse), better_at=k, n=n, p=p))
+    return out
 
 
 def name_cause(delta_chi2: list[float], gains: list[float], thresholds: list[float],
-               min_gain: float, *, heldout: list[float] | None = None
-               ) -> tuple[int | None, float]:
+               min_gain: float, *, heldout: list[float] | None = None,
+               chi2_sd: FloatArray | None = None) -> tuple[int | None, float]:
     """The decision rule: index of the named candidate (None: ``none``) and its confidence.
 
     A candidate is significant when its evidence exceeds its null threshold and its held-out
@@ -1274,7 +1336,9 @@ def name_cause(delta_chi2: list[float], gains: list[float], thresholds: list[flo
     penalised evidence -- goes to the lowest held-out NRMSE: predicting unseen set-points
     tests what each term says about the others (a neck's loss at pull-off, a visco-elastic
     loss with the indentation rate, a damping with the gap), which equal fits of the same
-    orbits need not separate (``TIE_CHI2``). The confidence is the softmax
+    orbits need not separate (``TIE_CHI2``); ``chi2_sd[i, j]``, the standard deviation of
+    candidates ``i`` and ``j``'s chi2 difference under a new noise draw (:mod:`.ties`), widens
+    the margin to ``TIE_SD`` of them. The confidence is the softmax
     weight of the answer over the penalised evidences halved (``none`` counting 0; extensions
     without held-out gain left out), a likelihood-ratio weight.
     """
@@ -1285,9 +1349,11 @@ def name_cause(delta_chi2: list[float], gains: list[float], thresholds: list[flo
     idx = int(sig[np.argmax((d - t)[sig])]) if sig.size else None
     if idx is not None and heldout is not None:
         h = np.asarray(heldout, float)
-        margin = tie_margin(d[idx])
+        sd = (np.full((d.size, d.size), math.nan) if chi2_sd is None
+              else np.asarray(chi2_sd, float))
         tied = [int(j) for j in sig
-                if (d - t)[idx] - (d - t)[j] <= margin and math.isfinite(h[j])]
+                if (d - t)[idx] - (d - t)[j] <= tie_margin(d[idx], sd[idx, j])
+                and math.isfinite(h[j])]
         if len(tied) > 1:
             idx = min(tied, key=lambda j: h[j])
     w = _weights(d, g, t, min_gain)

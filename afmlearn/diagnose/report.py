@@ -10,7 +10,9 @@ temporary sibling + rename):
     design.md section 3 (``cause``, ``confidence``, ``baseline``, ``extended``, ``gain``,
     ``candidates``, ``causes``, ``figures``; ``causes`` the ones the backward check kept)
     plus ``dropped_causes`` (named step by step, then dropped: cause, chi2 rise on removal,
-    threshold, held-out gain, reason), the held-out NRMSE per observation
+    threshold, held-out gain, reason), ``not_separated`` (per kept cause, the candidates of
+    its step the data do not separate from it: chi2 drops, their noise, held-out NRMSE and
+    the per-set-point sign test; :mod:`.ties`), the held-out NRMSE per observation
     (``observations``), the held-out design, the contact exponent's interval, provenance,
     calibration, energies, warnings, runtime.
 ``report.md``
@@ -41,6 +43,7 @@ from .hypotheses import default_hypotheses
 from .hypotheses.contact_geometry import exponent_summary
 from .model import DiagnosisModel
 from .observation import read_experiment
+from .ties import Tie
 
 __all__ = ["diagnose_trace", "report_record", "REPORT_FORMAT", "FigureWriter"]
 
@@ -175,8 +178,11 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
                     "delta_chi2": s.delta_chi2, "threshold": s.threshold,
                     "confidence": s.confidence,
                     "removal_chi2_rise": None if s.removal is None else s.removal.chi2_rise,
-                    "removal_gain": None if s.removal is None else s.removal.gain}
+                    "removal_gain": None if s.removal is None else s.removal.gain,
+                    "removal_note": None if s.removal is None else s.removal.note or None}
                    for s in dg.causes_],
+        "not_separated": [_tie_record(s.cause, k, t) for k, s in enumerate(dg.causes_, 1)
+                          for t in s.ties],
         "dropped_causes": [_removal_record(d) for d in dg.dropped_causes_],
         "figures": figures,
         "format": REPORT_FORMAT,
@@ -220,6 +226,14 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
     return jsonable(rec)
 
 
+def _tie_record(cause: str, step: int, t: Tie) -> dict[str, Any]:
+    return {"cause": cause, "step": step, "not_separated_from": t.cause,
+            "delta_chi2": t.named_delta_chi2, "other_delta_chi2": t.delta_chi2,
+            "chi2_difference_sd": t.chi2_sd, "heldout_nrmse": t.named_heldout_nrmse,
+            "other_heldout_nrmse": t.heldout_nrmse, "heldout_better_at": t.better_at,
+            "heldout_set_points": t.n, "heldout_sign_p": t.p, "text": t.text(cause)}
+
+
 def _removal_record(d: Removal) -> dict[str, Any]:
     return {"cause": d.cause, "chi2_rise": d.chi2_rise, "threshold": d.threshold,
             "heldout_gain": d.gain, "reason": d.reason}
@@ -240,6 +254,10 @@ def report_markdown(rec: dict[str, Any], figs: dict[str, Path]) -> str:
                      f"{rec['confidence']:.2f}; the extended model cuts the held-out error by "
                      f"**{100 * rec['gain']:.1f} %** (NRMSE {b['heldout_nrmse']:.3g} -> "
                      f"{e['heldout_nrmse']:.3g}).")
+    ties = rec.get("not_separated") or []
+    if ties:
+        # the data do not separate these candidates: said with the verdict, not hidden
+        lines += [""] + [f"**Tie:** {t['text']}." for t in ties]
     lines += ["", "| | baseline | extended |", "|---|---|---|",
               f"| equation | `{b['equation']}` | `{e['equation']}` |",
               f"| held-out NRMSE | {b['heldout_nrmse']:.4g} | {e['heldout_nrmse']:.4g} |",
