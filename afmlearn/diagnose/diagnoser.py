@@ -197,6 +197,14 @@ class Candidate:
     solution: Solution
     nrmse_per_observation: FloatArray
     details: dict[str, Any] = field(default_factory=dict)
+    #: the held-out gain the decision used when the hypothesis measures its own on its
+    #: signature (``AbstractHypothesis.heldout_gain``; NaN: the NRMSE gain ``gain`` decided)
+    decision_gain: float = math.nan
+
+    @property
+    def deciding_gain(self) -> float:
+        """The gain the decision reads: ``decision_gain`` when measured, else ``gain``."""
+        return self.gain if math.isnan(self.decision_gain) else self.decision_gain
 
     @property
     def score(self) -> float:
@@ -224,6 +232,9 @@ class Step:
     removal: Removal | None = None
     #: candidates of this step the data do not separate from it (:mod:`.ties`)
     ties: list[Tie] = field(default_factory=list)
+    #: the gain that decided when the cause measures its own (``Candidate.decision_gain``;
+    #: NaN: ``gain`` decided)
+    decision_gain: float = math.nan
 
 
 @final
@@ -615,7 +626,7 @@ class Diagnoser:
                     stale = False
             self._gains(remaining, fits, cands, current, calib)
             idx, conf = name_cause(
-                [c.delta_chi2 for c in cands], [c.gain for c in cands],
+                [c.delta_chi2 for c in cands], [c.deciding_gain for c in cands],
                 [c.threshold for c in cands], calib.min_gain,
                 heldout=None if single else [c.heldout_nrmse for c in cands],
                 chi2_sd=None if single else _sd_matrix(cands))
@@ -626,7 +637,7 @@ class Diagnoser:
             c = cands[idx]
             steps.append(Step(cause=c.cause, gain=c.gain, evidence=c.evidence,
                               delta_chi2=c.delta_chi2, threshold=c.threshold, confidence=conf,
-                              candidates=cands,
+                              candidates=cands, decision_gain=c.decision_gain,
                               ties=[] if single else not_separated(cands, idx,
                                                                    calib.min_gain)))
             for t in steps[-1].ties:
@@ -1066,15 +1077,19 @@ class Diagnoser:
             c.nrmse_per_observation = f.nrmse
             c.heldout_nrmse = _typical(f.nrmse)
             g = 1.0 - c.heldout_nrmse / _typical(current.nrmse)
-            # a cause may measure its gain on its own signature (a second mode: the harmonics
-            # next to f2, which the fundamental's error at an unseen gap would swamp)
+            c.gain = float(g) if math.isfinite(g) else -math.inf
+            # a cause may measure the gain that decides on its own signature (a second mode:
+            # the harmonics next to f2, which the fundamental's error at an unseen gap would
+            # swamp); the reported gain stays the NRMSE one (design.md section 3)
             own = h.heldout_gain(self._held, before=current.key, after=f.key, model=c.model)
             if own is not None and self.design_ != "tail":
-                g = own
-            c.gain = float(g) if math.isfinite(g) else -math.inf
-            c.significant = bool(c.delta_chi2 > c.threshold and c.gain > calib.min_gain)
+                c.decision_gain = float(own) if math.isfinite(own) else -math.inf
+            c.significant = bool(c.delta_chi2 > c.threshold
+                                 and c.deciding_gain > calib.min_gain)
             c.evidence = self._evidence_text(h, c, self._energies[id(c)])
-            self._log(f"  {c.cause}: held-out gain {c.gain:+.3f}")
+            self._log(f"  {c.cause}: held-out gain {c.gain:+.3f}"
+                      + ("" if math.isnan(c.decision_gain) else
+                         f" (decision gain {c.decision_gain:+.3f})"))
             if c.significant and top is None:
                 top = c
                 if self.design_ == "tail" and not self.all_gains:
@@ -1304,7 +1319,7 @@ def not_separated(cands: Sequence[Candidate], idx: int, min_gain: float) -> list
     top = cands[idx]
     out = []
     for j, c in enumerate(cands):
-        if j == idx or not (c.delta_chi2 > c.threshold and c.gain > min_gain):
+        if j == idx or not (c.delta_chi2 > c.threshold and c.deciding_gain > min_gain):
             continue
         sd = _sd(top, c)
         if abs(top.score - c.score) > tie_margin(max(top.delta_chi2, c.delta_chi2), sd):
@@ -1376,7 +1391,7 @@ def _none_weight(cands: Sequence[Candidate], min_gain: float) -> float:
     if not cands:
         return 1.0
     d = np.array([c.delta_chi2 for c in cands], float)
-    g = np.array([c.gain for c in cands], float)
+    g = np.array([c.deciding_gain for c in cands], float)
     t = np.array([c.threshold for c in cands], float)
     return float(_weights(d, g, t, min_gain)[0])
 

@@ -168,6 +168,10 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
                      "cause": dg.cause_, "causes": [s.cause for s in dg.causes_]},
         "gain": dg.gain_,
         "candidates": [{"cause": c.cause, "gain": c.gain, "score": c.score,
+                        **({} if math.isnan(c.decision_gain) else
+                           {"decision_gain": c.decision_gain,
+                            "decision_gain_basis": "the hypothesis' own held-out signature "
+                                                   "(AbstractHypothesis.heldout_gain)"}),
                         "evidence": c.evidence, "delta_chi2": c.delta_chi2,
                         "threshold": c.threshold, "significant": c.significant,
                         "heldout_nrmse": c.heldout_nrmse, "n_parameters": c.n_parameters,
@@ -179,7 +183,9 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
                     "confidence": s.confidence,
                     "removal_chi2_rise": None if s.removal is None else s.removal.chi2_rise,
                     "removal_gain": None if s.removal is None else s.removal.gain,
-                    "removal_note": None if s.removal is None else s.removal.note or None}
+                    "removal_note": None if s.removal is None else s.removal.note or None,
+                    **({} if math.isnan(s.decision_gain) else
+                       {"decision_gain": s.decision_gain})}
                    for s in dg.causes_],
         "not_separated": [_tie_record(s.cause, k, t) for k, s in enumerate(dg.causes_, 1)
                           for t in s.ties],
@@ -273,8 +279,12 @@ def report_markdown(rec: dict[str, Any], figs: dict[str, Path]) -> str:
               "|---|---|---|---|---|---|"]
     # a gain is measured only as far as the decision needs (n/c: not computed)
     for c in rec["candidates"]:
+        # a gain measured on the cause's own signature decided: both shown
+        gain = _num(c["gain"], "+.3f") + (f" (decided by {c['decision_gain']:+.3f}: "
+                                          f"{c['decision_gain_basis']})"
+                                          if "decision_gain" in c else "")
         lines.append(f"| {c['cause']} | {c['delta_chi2']:.1f} | {c['threshold']:.1f} | "
-                     f"{_num(c['gain'], '+.3f')} | {'yes' if c['significant'] else 'no'} | "
+                     f"{gain} | {'yes' if c['significant'] else 'no'} | "
                      f"{c['evidence']} |")
     design = rec["heldout"]["design"]
     held = (f"the last {100 * rec['split']['heldout_fraction']:.0f} % of the periods, never "

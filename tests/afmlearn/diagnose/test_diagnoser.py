@@ -152,6 +152,19 @@ def _cand(cause, drop, residual, per_obs, *, gain=0.5, threshold=9.88):
                      nrmse_per_observation=per)
 
 
+def test_the_decision_reads_the_causes_own_gain_and_reports_the_nrmse_one():
+    """A second mode refuted by the NRMSE of unseen set-points (-0.12) but seen on its own
+    harmonics (+0.83): the decision reads the latter, the report keeps the former."""
+    c = _cand("higher_mode", 521.0, np.zeros(3), [0.001] * 4, gain=-0.12, threshold=12.07)
+    assert c.deciding_gain == -0.12
+    c.decision_gain = 0.834
+    assert c.deciding_gain == 0.834 and c.gain == -0.12
+    other = _cand("viscoelastic", 519.0, np.zeros(3), [0.002] * 4, gain=0.5, threshold=7.24)
+    assert [t.cause for t in not_separated([other, c], 0, 0.05)] == ["higher_mode"]
+    c.decision_gain = 0.01
+    assert not_separated([other, c], 0, 0.05) == []
+
+
 def test_ties_are_reported_not_hidden():
     """The session-7 neck draw's pattern: neck / damping / visco drops 217 / 222 / 218, the
     fits close (chi2 noise sd ~12), the held-out set-points split: not separated, said in
@@ -274,6 +287,11 @@ def test_series_report_has_causes_and_per_setpoint_figures(make_series, tmp_path
                    "217 vs 222)"}
     assert "**Tie:** viscoelastic; not separated from contact_geometry" in report_markdown(
         {**rep, "not_separated": [tie]}, {})
+    # a gain measured on the cause's own signature decided: the NRMSE gain is still shown
+    c0 = {**rep["candidates"][0], "gain": -0.12, "decision_gain": 0.834,
+          "decision_gain_basis": "own signature"}
+    md = report_markdown({**rep, "candidates": [c0, *rep["candidates"][1:]]}, {})
+    assert "-0.120 (decided by +0.834: own signature)" in md
 
 
 def test_ramp_is_diagnosed_through_quasi_steady_windows(make_series):
