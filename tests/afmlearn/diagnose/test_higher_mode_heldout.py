@@ -134,7 +134,7 @@ DEMO_CASE = {
 @pytest.mark.slow
 def test_second_mode_next_to_6_to_1_is_named_with_a_gain(tmp_path):
     """The demo draw that the NRMSE gain refuted (-0.12, named none although the chi2 drop
-    was 521 against 12.1): with the gain on the mode's harmonics it is named, with a gain.
+    was 521 against 12.1): with the gain on the mode's harmonics (measured 0.83) it is named.
     (~1-2 min on one core: simulation and a one-hypothesis diagnosis.)"""
     from afmlearn.diagnose.diagnoser import Diagnoser
     from afmlearn.diagnose.observation import read_experiment
@@ -147,6 +147,8 @@ def test_second_mode_next_to_6_to_1_is_named_with_a_gain(tmp_path):
     c = dg.candidates_[0]
     assert c.delta_chi2 > 10 * c.threshold
     assert dg.cause_ == "higher_mode", c.evidence
-    assert dg.causes_[0].gain > dg.calibration_.min_gain
+    # the decision's gain is the mode's own (harmonics next to f2); the reported NRMSE gain
+    # may stay below it (-0.12 on this draw before)
+    assert c.decision_gain == c.deciding_gain > 0.5
     r = dg.extended_.spec.get(SecondMode).frequency_ratio
     assert abs(r - 5.8994) < 0.06          # the ratio / gain ridge (docs/diagnose.md)
