@@ -169,7 +169,9 @@ def _diagnose(out: Path, seed: int | None) -> None:
     print(f"  diagnosed in {time.perf_counter() - t:.1f} s")
     print(f"  cause:      {rep['cause']}  (confidence {rep['confidence']:.2f})")
     for i, step in enumerate(rep.get("causes", []), 1):
-        print(f"  step {i}:     {step['cause']}, gain added {step['gain']:.3f}")
+        own = (f" (NRMSE; decided by its own held-out gain {step['decision_gain']:.3f})"
+               if step.get("decision_gain") is not None else "")
+        print(f"  step {i}:     {step['cause']}, gain added {step['gain']:.3f}{own}")
     for d in rep.get("dropped_causes", []):
         print(f"  dropped:    {d['cause']} (named step by step, then removed from the final model: "
               f"{d['reason']})")
