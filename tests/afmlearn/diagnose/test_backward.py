@@ -255,10 +255,12 @@ def test_two_real_causes_both_stay_named(make_series):
 def test_a_real_cause_is_kept_when_the_rest_of_the_model_is_wrong(make_series):
     """Damping + detector dev draw [3, 78] (4 set-points x 20 periods) diagnosed WITHOUT the
     damping hypothesis, so the final model carries a wrong dissipative cause (visco-elastic):
-    the real detector's removal raises chi2 by ~40,000 (threshold 9.88), yet the final model
-    with the wrong visco term predicts the held-out set-points worse with the detector
-    (measured gain -0.25). The backward check keeps it, with the conflict said in a note and
-    a warning (before: dropped by its gain, and the diagnosis named visco alone)."""
+    the real detector's removal raises chi2 by ~40,000 (threshold 9.88). The held-out gain of
+    the detector in that final model is fragile: -0.25 on 773f2bc (the detector dropped by
+    it, visco named alone), +0.69 on 95d533f (its wider tie margin re-measures one more
+    first-step candidate), and under pytest on 95d533f the detector was named alone; whatever
+    it is, the detector stays, and a conflict is said in a note and a warning. (The rule
+    itself: the fast tests above.)"""
     path, case = make_series("long_range_damping+detector_nonlinearity", 3)
     dg = Diagnoser(hypotheses=[Viscoelastic(), DetectorNonlinearity()])
     dg.fit(read_trace(path))
@@ -267,7 +269,8 @@ def test_a_real_cause_is_kept_when_the_rest_of_the_model_is_wrong(make_series):
     assert "detector_nonlinearity" in named, msg
     assert not any(d.cause == "detector_nonlinearity" for d in dg.dropped_causes_), msg
     det = next(s for s in dg.causes_ if s.cause == "detector_nonlinearity")
-    assert det.removal is not None and det.removal.chi2_rise > 100 * det.removal.threshold
-    if not det.removal.gain > MIN_GAIN:      # the conflict: said, not hidden
-        assert "another of its causes" in det.removal.note
-        assert any("detector_nonlinearity kept although" in w for w in dg.warnings_)
+    if det.removal is not None:              # two causes named: the backward check ran
+        assert det.removal.chi2_rise > 100 * det.removal.threshold, msg
+        if not det.removal.gain > MIN_GAIN:  # the conflict: said, not hidden
+            assert "another of its causes" in det.removal.note
+            assert any("detector_nonlinearity kept although" in w for w in dg.warnings_)
