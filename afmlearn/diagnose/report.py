@@ -263,7 +263,8 @@ def report_markdown(rec: dict[str, Any], figs: dict[str, Path]) -> str:
     ties = rec.get("not_separated") or []
     if ties:
         # the data do not separate these candidates: said with the verdict, not hidden
-        lines += [""] + [f"**Tie:** {t['text']}." for t in ties]
+        for t in ties:
+            lines += ["", f"**Tie:** {t['text']}."]
     lines += ["", "| | baseline | extended |", "|---|---|---|",
               f"| equation | `{b['equation']}` | `{e['equation']}` |",
               f"| held-out NRMSE | {b['heldout_nrmse']:.4g} | {e['heldout_nrmse']:.4g} |",
