@@ -178,6 +178,10 @@ def _diagnose(out: Path, seed: int | None) -> None:
     if rep["cause"] != "none":
         print(f"  gain:       {rep['gain']:.3f}  (NRMSE on set-points never fitted "
               f"{rep['baseline']['heldout_nrmse']:.3g} -> {rep['extended']['heldout_nrmse']:.3g})")
+        if rep["gain"] <= 0 and any(s.get("decision_gain") is not None
+                                    for s in rep.get("causes", [])):
+            print("              (not positive: the unseen set-points' NRMSE is dominated by "
+                  "errors both models share; the step lines give the gain that decided)")
     print(f"  extended:   {rep['extended']['equation']}")
     for warning in rep.get("warnings", []):
         print(f"  warning:    {warning}")
