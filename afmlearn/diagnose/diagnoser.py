@@ -272,6 +272,46 @@ class _Fit:
     warm: Any = None
 
 
+@dataclass(eq=False)
+class _Experiment:
+    """What :meth:`Diagnoser.fit`'s stages read about the data (:meth:`Diagnoser._observe`)."""
+
+    traces: Sequence[Any]
+    obs: list[Observation]
+    orbits: list[PeriodicOrbit]
+    held: list[HeldOut]
+    hbs: list[HarmonicBalance]
+    jb: JointBalance
+    ctx: Context
+    calib: NullCalibration
+    #: the representative observation (the smallest rest gap)
+    rep: int
+
+    @property
+    def single(self) -> bool:
+        """One record (held out: its last periods)."""
+        return len(self.obs) == 1
+
+
+@dataclass(eq=False)
+class _Search:
+    """The forward search's outcome (:meth:`Diagnoser._forward`)."""
+
+    #: the model of every cause named (the baseline when none)
+    current: _Fit
+    steps: list[Step] = field(default_factory=list)
+    #: per step, the model it was tested against and what its extension changed
+    before: list[_Fit] = field(default_factory=list)
+    changes: list[tuple[frozenset[str], bool]] = field(default_factory=list)
+    #: ``current.nrmse`` was measured before its last refinement (:meth:`Diagnoser._converge`)
+    stale: bool = False
+    #: the first step's candidates and the confidence of its answer
+    first: list[Candidate] | None = None
+    confidence: float = 1.0
+    #: details of every cause tested, by cause
+    tested: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
 @final
 class _Probe:
     """:class:`~afmlearn.diagnose.hypotheses.base.Probe` of one fitted extension."""
@@ -500,6 +540,26 @@ class Diagnoser:
         hyps = default_hypotheses() if self.hypotheses is None else list(self.hypotheses)
         self.warnings_: list[str] = []
         self.untested_reason_: str | None = None
+        exp = self._observe(data, row)
+        base = self._baseline(exp)
+        search = self._forward(self._testable(hyps, exp), base, exp)
+        final, steps, confidence = self._backward_check(search, base, exp)
+        self.candidates_ = search.first or []
+        self.causes_ = steps
+        self.cause_ = steps[0].cause if steps else "none"
+        # "none" because nothing was tested is no evidence for the baseline
+        self.confidence_ = 0.0 if self.untested_reason_ else confidence
+        self._finish(base, final, exp.rep, exp.obs, exp.orbits, exp.held, search.tested)
+        self.runtime_s_ = time.perf_counter() - t0
+        self._log(f"causes {[s.cause for s in steps] or ['none']} (gain {self.gain_:.3f}) in "
+                  f"{self.runtime_s_:.1f} s")
+        return self
+
+    # ------------------------------------------------------------------ fit's stages
+    def _observe(self, data: Any, row: int | None) -> _Experiment:
+        """Stages 1-2: the observations, checked and calibrated, denoised, their joint
+        balance, the design's null thresholds and held-out design (``calibration_``,
+        ``free_harmonics_``, ``folds_``, ``design_``)."""
         traces = as_traces(data, row)
         obs = build_observations(traces, phase_sd=float(self.drive_phase_sd),
                                  window_periods=float(self.ramp_window_periods),
@@ -557,17 +617,26 @@ class Diagnoser:
         held = [self._reference(o, s, orb, single)
                 for o, s, orb in zip(obs, spans, orbits, strict=True)]
         self._obs, self._orbits, self._held, self._jb = obs, orbits, held, jb
-        # -- baseline (twice: the second whitened by the first's Hill operators)
+        rep = int(np.argmin([o.gap for o in obs]))
+        self._rep = rep
+        return _Experiment(traces=traces, obs=obs, orbits=orbits, held=held, hbs=hbs, jb=jb,
+                           ctx=ctx, calib=calib, rep=rep)
+
+    def _baseline(self, exp: _Experiment) -> _Fit:
+        """Stage 3: the baseline, fitted twice by equation error (the second whitened by the
+        first's Hill operators), then refined by output error to convergence; its held-out
+        NRMSE measured."""
         self._log("baseline")
+        jb, ctx, single = exp.jb, exp.ctx, exp.single
         b0 = fit_baseline(jb, ctx)
-        for i, hb in enumerate(hbs):
+        for i, hb in enumerate(exp.hbs):
             hb.set_whitening(dataclasses.replace(
                 b0, spec=b0.spec.replace(drive_phase=b0.phases[i])))
         base_hb = fit_baseline(jb, ctx)
         # one record: 256 RK4 steps per period as calibrated; several: 128 (with located force
         # switches, measured on 8-set-point series at 200 samples/period and 1 % noise: the
         # harmonics move by at most 0.10 of their noise against 2048 steps, chi2 by <= 0.011)
-        oe = OutputError(jb, cal0.scales, n_out=256 if single else 128)
+        oe = OutputError(jb, exp.obs[0].cal.scales, n_out=256 if single else 128)
         self._oe = oe
         # the baseline is what every cause is measured against: refined to convergence (an
         # unfinished baseline shows as evidence for every cause: measured chi2 drops ~5e4 for
@@ -579,114 +648,133 @@ class Diagnoser:
                                   "(shooting); its chi2 is that of the last iterate")
         base_fit = _Fit(base, base_hb, build, params, "none", np.empty(0), oe.snapshot())
         base_fit.nrmse = self._heldout(base_fit)
-        # -- causes, step by step
-        rep = int(np.argmin([o.gap for o in obs]))
-        self._rep = rep
-        current = base_fit
-        remaining = list(hyps)
-        lag = max(o.ramp_lag for o in obs)
+        return base_fit
+
+    def _testable(self, hyps: list[AbstractHypothesis], exp: _Experiment
+                  ) -> list[AbstractHypothesis]:
+        """The causes to test: none when a ramp is too fast for quasi-steady windows (their
+        bias would be "explained" by causes; observation.py; the warning names the rate and
+        the limit), with ``untested_reason_`` saying so."""
+        lag = max(o.ramp_lag for o in exp.obs)
         if lag > MAX_RAMP_LAG and hyps:
-            # too fast for quasi-steady windows: their bias would be "explained" by causes
-            # (observation.py; the warning names the rate and the limit)
             self._log("ramp too fast for quasi-steady windows: no cause is tested")
             self.untested_reason_ = (
                 f"no cause was tested: the ramp moves the gap by {100 * lag:.3g} % of L_ref per "
                 f"settling time, above the {100 * MAX_RAMP_LAG:.0f} % limit of quasi-steady "
                 f"windows (see the warnings)")
-            remaining = []
-        steps: list[Step] = []
-        #: per step, the model it was tested against and what its extension changed
-        before: list[_Fit] = []
-        changes: list[tuple[frozenset[str], bool]] = []
-        stale = False
-        first: list[Candidate] | None = None
-        conf0 = 1.0
-        tested: dict[str, dict[str, Any]] = {}
+            return []
+        return list(hyps)
+
+    def _forward(self, hyps: list[AbstractHypothesis], base: _Fit, exp: _Experiment
+                 ) -> _Search:
+        """Stage 4, the forward search: at each step every remaining cause extends the
+        current model (:meth:`_candidates`), the significant one with the largest penalised
+        evidence is named (:func:`name_cause`), the model is extended with it and converged
+        before the next step; stops when none is significant or after ``max_causes``."""
+        search = _Search(current=base)
+        remaining = list(hyps)
+        calib, single = exp.calib, exp.single
         self._energies: dict[int, FloatArray] = {}
         for k in range(self.max_causes):
             if not remaining:
                 break
             self._log(f"step {k + 1}: testing {len(remaining)} cause(s) against "
-                      f"{current.key}")
-            fits: list[_Fit] = []
-            cands: list[Candidate] = []
-            bar = tqdm(remaining, desc=f"diagnose: causes (step {k + 1})", unit="cause",
-                       disable=not self.progress, file=sys.stderr, leave=False)
-            for h in bar:
-                bar.set_postfix_str(h.cause)
-                f, c = self._test(h, current, ctx, calib, traces, tested, step=k)
-                fits.append(f)
-                cands.append(c)
-            if n_obs > 1:
-                moved = (self._own_basin(remaining, fits, cands, current, ctx, calib, traces,
-                                         tested) if k == 0 else
-                         self._common_basin(remaining, fits, cands, current))
-                if moved:
-                    current.nrmse[:] = self._heldout(current)
-                    stale = False
-            self._gains(remaining, fits, cands, current, calib)
+                      f"{search.current.key}")
+            fits, cands, moved = self._candidates(k, remaining, search.current, exp,
+                                                  search.tested)
+            if moved:
+                search.stale = False
             idx, conf = name_cause(
                 [c.delta_chi2 for c in cands], [c.deciding_gain for c in cands],
                 [c.threshold for c in cands], calib.min_gain,
                 heldout=None if single else [c.heldout_nrmse for c in cands])
-            if first is None:
-                first, conf0 = cands, conf
+            if search.first is None:
+                search.first, search.confidence = cands, conf
             if idx is None:
                 break
             c = cands[idx]
-            steps.append(Step(cause=c.cause, gain=c.gain, evidence=c.evidence,
-                              delta_chi2=c.delta_chi2, threshold=c.threshold, confidence=conf,
-                              candidates=cands, decision_gain=c.decision_gain,
-                              ties=[] if single else not_separated(cands, idx,
-                                                                   calib.min_gain)))
-            for t in steps[-1].ties:
+            search.steps.append(Step(
+                cause=c.cause, gain=c.gain, evidence=c.evidence, delta_chi2=c.delta_chi2,
+                threshold=c.threshold, confidence=conf, candidates=cands,
+                decision_gain=c.decision_gain,
+                ties=[] if single else not_separated(cands, idx, calib.min_gain)))
+            for t in search.steps[-1].ties:
                 self._log(f"  {t.text(c.cause)}")
-            before.append(current)
-            changes.append(_change(current.sol.spec, fits[idx].sol.spec))
-            current = fits[idx]
-            stale = False       # its held-out NRMSE was measured for its gain
+            search.before.append(search.current)
+            search.changes.append(_change(search.current.sol.spec, fits[idx].sol.spec))
+            search.current = fits[idx]
+            search.stale = False       # its held-out NRMSE was measured for its gain
             remaining = [h for h in remaining if h.cause != c.cause]
-            if remaining and k + 1 < self.max_causes and n_obs > 1:
-                # the next causes are tested against this model: converge it first, or any
-                # added freedom would show the unfinished fit as evidence
-                if n_obs > 1 and current.warm is not None:
-                    self._oe.restore(current.warm)
-                current.sol, _ = self._oe.refine(current.sol, current.build, current.params,
-                                                 max_nfev=25)
-                current.warm = self._oe.snapshot()
-                stale = True        # its held-out NRMSE is the fit's before this refinement
+            if remaining and k + 1 < self.max_causes and not single:
+                self._converge(search.current)
+                search.stale = True     # its held-out NRMSE is the fit's before this refinement
+        return search
+
+    def _candidates(self, k: int, hyps: list[AbstractHypothesis], current: _Fit,
+                    exp: _Experiment, tested: dict[str, dict[str, Any]]
+                    ) -> tuple[list[_Fit], list[Candidate], bool]:
+        """One step's candidates: every cause of ``hyps`` fitted as an extension of
+        ``current`` (:meth:`_test`), their drops measured against the best basin
+        (:meth:`_own_basin` at the first step, :meth:`_common_basin` after; several
+        observations), their held-out gains (:meth:`_gains`). Also returns whether
+        ``current`` moved (its held-out NRMSE is then measured again)."""
+        fits: list[_Fit] = []
+        cands: list[Candidate] = []
+        bar = tqdm(hyps, desc=f"diagnose: causes (step {k + 1})", unit="cause",
+                   disable=not self.progress, file=sys.stderr, leave=False)
+        for h in bar:
+            bar.set_postfix_str(h.cause)
+            f, c = self._test(h, current, exp.ctx, exp.calib, exp.traces, tested, step=k)
+            fits.append(f)
+            cands.append(c)
+        moved = False
+        if not exp.single:
+            moved = (self._own_basin(hyps, fits, cands, current, exp.ctx, exp.calib,
+                                     exp.traces, tested) if k == 0 else
+                     self._common_basin(hyps, fits, cands, current))
+            if moved:
+                current.nrmse[:] = self._heldout(current)
+        self._gains(hyps, fits, cands, current, exp.calib)
+        return fits, cands, moved
+
+    def _converge(self, current: _Fit) -> None:
+        """The model just extended, refined before the next causes are tested against it (or
+        any added freedom would show the unfinished fit as evidence); in place."""
+        if current.warm is not None:
+            self._oe.restore(current.warm)
+        current.sol, _ = self._oe.refine(current.sol, current.build, current.params,
+                                         max_nfev=25)
+        current.warm = self._oe.snapshot()
+
+    def _backward_check(self, search: _Search, base: _Fit, exp: _Experiment
+                        ) -> tuple[_Fit, list[Step], float]:
+        """Stage 5: the final model, the steps kept and the first answer's confidence. Two or
+        more causes named on several observations: the backward check (:meth:`_backward`;
+        ``dropped_causes_``, ``backward_cpu_s_``); one cause named (its step-1 drop was already
+        measured against the baseline refitted from its own point, :meth:`_own_basin`, which
+        is this check with one refit) whose model was converged for a further step that named
+        nothing: its held-out NRMSE measured again, since ``gain_`` is read from the model
+        reported."""
+        current, steps, confidence = search.current, search.steps, search.confidence
         self.dropped_causes_: list[Removal] = []
         self.backward_cpu_s_ = 0.0
-        if len(steps) >= 2 and n_obs > 1:
-            # (one cause: its step-1 drop was already measured against the baseline refitted
-            # from its own point, _own_basin, which is this check with one refit)
+        if len(steps) >= 2 and not exp.single:
             c0 = time.process_time()
             first_cause = steps[0].cause
-            current, steps = self._backward(steps, before, changes, current, base_fit, ctx,
-                                            calib, stale=stale)
+            current, steps = self._backward(steps, search.before, search.changes, current,
+                                            base, exp.ctx, exp.calib, stale=search.stale)
             self.backward_cpu_s_ = time.process_time() - c0
             if not steps:
                 self.warnings_.append(
                     f"every named cause was dropped by the backward check (none raises chi2 "
                     f"above its threshold when removed from the final model): "
                     f"{[d.cause for d in self.dropped_causes_]}; reported as none")
-                conf0 = _none_weight(first or [], calib.min_gain)
+                confidence = _none_weight(search.first or [], exp.calib.min_gain)
             elif steps[0].cause != first_cause:
-                conf0 = steps[0].confidence
-        elif stale and steps:
-            # one cause named, and its model converged for a further step that named nothing:
-            # gain_ is read from the model reported, so its held-out NRMSE is measured again
+                confidence = steps[0].confidence
+        elif search.stale and steps:
             current.nrmse[:] = self._heldout(current)
-        self.candidates_ = first or []
-        self.causes_ = steps
-        self.cause_ = steps[0].cause if steps else "none"
-        # "none" because nothing was tested is no evidence for the baseline
-        self.confidence_ = 0.0 if self.untested_reason_ else conf0
-        self._finish(base_fit, current, rep, obs, orbits, held, tested)
-        self.runtime_s_ = time.perf_counter() - t0
-        self._log(f"causes {[s.cause for s in steps] or ['none']} (gain {self.gain_:.3f}) in "
-                  f"{self.runtime_s_:.1f} s")
-        return self
+        return current, steps, confidence
 
     # ------------------------------------------------------------------ backward check
     def _backward(self, steps: list[Step], before: list[_Fit],
