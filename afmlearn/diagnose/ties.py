@@ -1,7 +1,7 @@
 """Ties between candidate causes: whether the data separate the named cause from another.
 
 Two candidates fitted to the same orbits are compared twice (:func:`~afmlearn.diagnose.
-diagnoser.name_cause`): by their output-error chi-square (in-sample) and, when that is a tie,
+naming.name_cause`): by their output-error chi-square (in-sample) and, when that is a tie,
 by their held-out NRMSE on set-points never fitted. Each comparison has its own noise:
 
 * **chi2.** Both fits see the same noise ``e`` (whitened: unit variance per residual row).
