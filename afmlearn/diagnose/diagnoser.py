@@ -267,6 +267,7 @@ class _Fit:
     warm: Any = None
 
 
+@final
 @dataclass(eq=False)
 class _Experiment:
     """What :meth:`Diagnoser.fit`'s stages read about the data (:meth:`Diagnoser._observe`)."""
@@ -288,6 +289,7 @@ class _Experiment:
         return len(self.obs) == 1
 
 
+@final
 @dataclass(eq=False)
 class _Search:
     """The forward search's outcome (:meth:`Diagnoser._forward`)."""
