@@ -383,6 +383,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--lead-in", type=float, default=LEAD_IN,
                     help="--group: lower turning point at the ramp's start (/ 10 nm); a longer "
                          "one adds periods in proportion (same ramp speed)")
+    ap.add_argument("--hold-free-scale", action="store_true",
+                    help="--group: hold every curve's free-amplitude scale at 1 in the joint "
+                         "fits (sessions 4-8); default: fitted per curve")
     add_doc_flag(ap)
     args = ap.parse_args(argv)
     info = machine_info()
@@ -456,7 +459,8 @@ def run_group(job: dict) -> dict:
                               ).fit(c) for c in curves]
     t_single = time.perf_counter() - t0
     t1 = time.perf_counter()
-    joint = GroupDiagnoser(lockin=lockin, max_evaluations=job["joint_evaluations"]).fit(
+    joint = GroupDiagnoser(lockin=lockin, max_evaluations=job["joint_evaluations"],
+                           free_scale=job.get("free_scale", False)).fit(
         curves, extra_starts=starts_from_singles(singles))
     t_joint = time.perf_counter() - t1
     ext = joint.extended_
@@ -473,6 +477,7 @@ def run_group(job: dict) -> dict:
             "confidence_joint": joint.confidence_,
             "candidates_joint": [{k: v for k, v in c.items()} for c in joint.candidates_],
             "loo_joint": joint.loo_, "members": members, "t_single": t_single,
+            "nuisances_joint": ext.values_["curves"],
             "t_joint": t_joint,
             "n_evaluations_joint": joint.n_evaluations_,
             "load": os.getloadavg()[0]}
@@ -604,7 +609,8 @@ def run_groups(args, info: dict) -> int:
         return (r["seed"] == args.seed and r["periods"] == args.periods
                 and r["group"] == args.group
                 and tuple(r.get("free_span", GROUP_FREE)) == args.span
-                and (r.get("lead_in") or LEAD_IN) == args.lead_in)
+                and (r.get("lead_in") or LEAD_IN) == args.lead_in
+                and r.get("free_scale", False) == (not args.hold_free_scale))
 
     done = {(r["cause"], r["index"], r["group"]) for r in load(path) if same(r)}
     causes = args.causes.split(",")
@@ -614,7 +620,8 @@ def run_groups(args, info: dict) -> int:
             job = {"cause": str(c), "index": i, "seed": args.seed, "periods": args.periods,
                    "every": args.every, "max_evaluations": args.max_evaluations,
                    "group": args.group, "joint_evaluations": args.joint_evaluations,
-                   "free_span": list(args.span), "lead_in": args.lead_in}
+                   "free_span": list(args.span), "lead_in": args.lead_in,
+                   "free_scale": not args.hold_free_scale}
             if args.report_only or (job["cause"], i, args.group) in done:
                 continue
             rec = run_group(job)
@@ -640,7 +647,10 @@ def run_groups(args, info: dict) -> int:
     # another amplitude span gets its own section (the default span's results stay)
     wide = args.span != GROUP_FREE
     lead = args.lead_in != LEAD_IN
-    write_section("curve_groups" + ("_wide" if wide else "") + ("_lead" if lead else ""),
+    # the fitted free-amplitude scales (session 9) get their own sections
+    scaled = not args.hold_free_scale
+    write_section("curve_groups" + ("_wide" if wide else "") + ("_lead" if lead else "")
+                  + ("_scaled" if scaled else ""),
                   "Lock-in curves: joint fit across free amplitudes vs single curves "
                   f"(`bench_curves.py --group`{' --free-span' if wide else ''}"
                   f"{' --lead-in' if lead else ''})",
@@ -662,7 +672,7 @@ def group_oracle(job: dict) -> dict:
                        free_amplitude=float(f), member=m,
                        lead_in=job.get("lead_in", LEAD_IN)) for m, f in enumerate(frees)]
     curves = [_curve_of(c["data"]) for c in cases]
-    keys = ("cause", "index", "seed", "periods", "group", "free_span", "lead_in")
+    keys = ("cause", "index", "seed", "periods", "group", "free_span", "lead_in", "free_scale")
     out = {k: job.get(k) for k in keys}
     vals = [truth_values(job["cause"], c["truth"], c["data"], cv)
             for c, cv in zip(cases, curves, strict=True)]
@@ -677,11 +687,13 @@ def group_oracle(job: dict) -> dict:
     unit = curves[0].length_m
     fixed = CurveLaw(a0=A0 / unit, radius=R_TIP / unit).replace(**law)
     drift = next((h for h in EXTENSIONS if h.cause == "drift"), None)
+    # the diagnosis' nuisances: each curve's free-amplitude scale where it fits them
+    scale = bool(job.get("free_scale", False))
     nuis = GroupFitter(hypothesis=drift if job["cause"] == "drift" else None,
-                       fixed_law=(fixed, unit), lockins=lockins).fit(curves)
+                       fixed_law=(fixed, unit), lockins=lockins, free_scale=scale).fit(curves)
     start = {"law": law, "length_m": unit, "curves": nuis.values_["curves"]}
     fit = GroupFitter(hypothesis=hyp, start=start, rescales=((1.0, 1.0),), max_nfev=40,
-                      lockins=lockins).fit(curves)
+                      lockins=lockins, free_scale=scale).fit(curves)
     c0 = job["candidates_joint"][0]
     m = fit.n_fit_
     b_chi2 = c0["chi2"] * math.exp((c0["evidence"] + c0["n_parameters"] * math.log(m)) / m)

@@ -5,7 +5,10 @@ but not the surface position, the drive frequency or the drift of each recording
 fit holds ONE law (the baseline's attraction and stiffness plus a hypothesis' terms, in the
 length unit of the group, :attr:`GroupFitter.length_m_`) and per-curve nuisances: surface
 position (``offset``), drive frequency / f0 (``omega``) and, for the drift hypothesis, the
-drift rate (``drift``). Each curve is predicted with the shared law rescaled to its own free
+drift rate (``drift``) and, with ``free_scale=True``, the free-amplitude scale
+(``free_scale``: the drive's free amplitude / the amplitude measured at the ramp's far end, which
+is the curve's length unit; a ramp that starts within reach of a long-range force does not
+start free). Each curve is predicted with the shared law rescaled to its own free
 amplitude (:func:`afmlearn.curves.transfer.rescale_law`, the SI force unchanged) by the
 single-curve forward model (:class:`SlowFlowModel`); the residuals of all approaches are
 weighted by each curve's noise and concatenated.
@@ -75,6 +78,9 @@ def group_length(curves: Sequence[Curve]) -> float:
     return float(np.exp(np.mean([math.log(c.length_m) for c in curves])))
 
 
+#: bounds of the per-curve free-amplitude scale (as the single fit's ``FREE_SCALE`` parameter)
+FREE_SCALE_BOUNDS = (0.9, 3.0)
+
 #: surface guess of a curve whose amplitude is never reduced below 90 %, below its closest
 #: piezo position (/ free amplitude): out of the tip's reach within the +-0.6 bounds, so the
 #: model's tip is not forced onto the surface (a fake dip that an extension would "explain")
@@ -130,13 +136,18 @@ class GroupFitter:
     fixed_law : (CurveLaw, float) or None
         A law and its length unit [m] held fixed: only the nuisances are fitted (predicting
         curves not used to fit the law); their start is a scan of the surface positions.
+    free_scale : bool
+        Fit each curve's free-amplitude scale (``FREE_SCALE``, start 1, bounds
+        ``FREE_SCALE_BOUNDS``) as a nuisance: the ramp's far end, where the curve's length unit
+        and free phase are measured, need not be free (a long-range force already acting
+        there). False: held at 1.
 
     Attributes
     ----------
     values_ : dict
         ``law``: shared fitted fields (group unit); ``curves``: per-curve ``offset``,
-        ``omega`` (and ``drift``); ``length_m``: the group unit [m] (a start in another unit,
-        e.g. of a subset of the curves, is rescaled to the same SI law).
+        ``omega`` (and ``drift``, ``free_scale``); ``length_m``: the group unit [m] (a start
+        in another unit, e.g. of a subset of the curves, is rescaled to the same SI law).
     law_ : CurveLaw
         The shared law in the group unit (lengths / :attr:`length_m_`).
     length_m_ : float
@@ -159,7 +170,8 @@ class GroupFitter:
                  extra_starts: Sequence[dict] = (), n_starts: int = 1,
                  rescales: tuple[tuple[float, float], ...] = RESCALES,
                  max_evaluations: int | None = None,
-                 fixed_law: tuple[CurveLaw, float] | None = None) -> None:
+                 fixed_law: tuple[CurveLaw, float] | None = None,
+                 free_scale: bool = False) -> None:
         if hypothesis is not None and not isinstance(hypothesis, Hypothesis):
             raise ValueError(f"hypothesis must be a Hypothesis, got {type(hypothesis).__name__}")
         for name, v in (("a0_m", a0_m), ("tip_radius_m", tip_radius_m), ("step", step)):
@@ -186,6 +198,7 @@ class GroupFitter:
                                           and float(fixed_law[1]) > 0.0):
             raise ValueError("fixed_law must be (CurveLaw, its length unit [m] > 0)")
         self.fixed_law = fixed_law
+        self.free_scale = bool(free_scale)
 
     # ------------------------------------------------------------------ public API
     def fit(self, curves: Sequence[Curve]) -> GroupFitter:
@@ -216,7 +229,7 @@ class GroupFitter:
             self._base = rescale_law(law, float(length) / self.length_m_)
             self._shared = []
         self._drift = next((p for p in hyp if p.field == DRIFT), None)
-        self._n_nuis = 2 + (self._drift is not None)
+        self._n_nuis = 2 + (self._drift is not None) + self.free_scale
         self._w0 = [SlowFlowModel.for_curve(c).omega for c in curves]
         self._g0 = [offset_guess(c) for c in curves]
         lo, hi = [], []
@@ -226,6 +239,9 @@ class GroupFitter:
             if self._drift is not None:
                 lo.append(self._drift.low)
                 hi.append(self._drift.high)
+            if self.free_scale:
+                lo.append(FREE_SCALE_BOUNDS[0])
+                hi.append(FREE_SCALE_BOUNDS[1])
         lo += [_enc(p, p.low) for p in self._shared]
         hi += [_enc(p, p.high) for p in self._shared]
         self._lo, self._hi = np.array(lo), np.array(hi)
@@ -262,6 +278,8 @@ class GroupFitter:
             x += [cv.get(OFFSET, self._g0[i]), cv.get(OMEGA, self._w0[i])]
             if self._drift is not None:
                 x.append(cv.get(DRIFT, self._drift.init))
+            if self.free_scale:
+                x.append(cv.get(FREE_SCALE, 1.0))
         law = values["law"]
         unit = values.get("length_m")
         if law and unit is not None and abs(unit / self.length_m_ - 1.0) > 1e-12:
@@ -287,6 +305,8 @@ class GroupFitter:
             cv = {OFFSET: float(x[k * i]), OMEGA: float(x[k * i + 1])}
             if self._drift is not None:
                 cv[DRIFT] = float(x[k * i + 2])
+            if self.free_scale:
+                cv[FREE_SCALE] = float(x[k * i + k - 1])
             curves.append(cv)
         law = {p.field: _dec(p, xi) for p, xi in zip(self._shared, x[k * len(self._curves):],
                                                       strict=True)}
@@ -479,10 +499,12 @@ class GroupFitter:
 
 def _predict(law: CurveLaw, nuisances: dict, curve: Curve, lockin: LockIn | None,
              step: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Amplitude and lag of ``curve`` under ``law`` (its unit) and its nuisances."""
+    """Amplitude and lag of ``curve`` under ``law`` (its unit) and its nuisances (the drive
+    gives the free amplitude ``free_scale``, 1 when not fitted)."""
     w = nuisances[OMEGA]
     q = curve.quality_factor
-    model = SlowFlowModel(quality_factor=q, omega=w, drive=math.hypot(1.0 - w * w, w / q),
+    model = SlowFlowModel(quality_factor=q, omega=w,
+                          drive=nuisances.get(FREE_SCALE, 1.0) * math.hypot(1.0 - w * w, w / q),
                           lockin=lockin, step=step)
     gap = (curve.z_piezo - nuisances[OFFSET]
            + nuisances.get(DRIFT, 0.0) * (curve.tau - curve.tau[0]))

@@ -68,10 +68,16 @@ class Parameter:
 @final
 @dataclass(frozen=True)
 class Hypothesis:
-    """A cause and the parameters it adds to the baseline."""
+    """A cause and the parameters it adds to the baseline.
+
+    ``hysteretic``: the cause acts between approach and retraction (the adhesion neck forms
+    on contact and breaks on the way out): a joint diagnosis tests it on the retraction of the
+    fitted curves, not on left-out curves (:class:`afmlearn.curves.group_diagnose.GroupDiagnoser`).
+    """
 
     cause: str
     parameters: tuple[Parameter, ...]
+    hysteretic: bool = False
 
     def in_units(self, length_m: float) -> Hypothesis:
         """The hypothesis with every parameter in units of ``length_m`` [m]
@@ -114,7 +120,8 @@ EXTENSIONS: tuple[Hypothesis, ...] = (
     Hypothesis("electrostatic", (Parameter("electrostatic", 1e-4, 1e-9, 1e0,
                                            alternatives=(1e-3, 1e-2)),)),
     Hypothesis("adhesion_hysteresis", (Parameter("neck", 0.01, 1e-5, 0.5,
-                                                 alternatives=(0.003, 0.03)),)),
+                                                 alternatives=(0.003, 0.03)),),
+               hysteretic=True),
     # 1e-6 per unit time: ~0.05 free amplitudes over a 2000-period ramp
     Hypothesis(DRIFT, (Parameter(DRIFT, 0.0, -1e-4, 1e-4, log=False,
                                  alternatives=(-2e-6, 2e-6)),)),

@@ -239,3 +239,62 @@ def test_starts_from_singles_leave_out_the_single_curve_free_scale():
         # the same SI law in the group unit: the near decay is 0.2 x 20 nm
         assert s["law"]["decay_length"] * length == pytest.approx(0.2 * L1, rel=1e-12)
         assert s["law"]["damping"] == pytest.approx(DAMPED.damping, rel=1e-12)
+
+
+def _tail_curve(law: CurveLaw, length_m: float, n: int = 60) -> tuple[Curve, float]:
+    """A noiseless curve whose ramp starts within reach of the electrostatic tail of ``law``
+    (units of ``length_m``, the true free amplitude), normalised as a recording is: by the
+    amplitude at the ramp's far end, which is below the free one. Returns the curve and the
+    true free-amplitude scale (free / far-end amplitude)."""
+    tau = 2 * math.pi * 6 * np.arange(2 * n)
+    gap = np.concatenate([np.linspace(1.25, 0.3, n), np.linspace(0.3, 1.25, n)])
+    model = SlowFlowModel(quality_factor=Q, omega=1.0, drive=1.0 / Q, step=4 * math.pi)
+    amp, phi = model.predict(law, tau, gap)
+    seg = np.repeat(np.array([0, 1], dtype=np.int8), n)
+    raw = Curve(tau=tau, amplitude=amp, phase=phi, z_piezo=gap + 1.0, segment=seg,
+                quality_factor=Q, spring_constant_n_per_m=K_N, resonance_frequency_hz=F0,
+                length_m=length_m, drive_frequency_hz=F0)
+    far = float(np.median(amp[raw.far()]))
+    return Curve(tau=tau, amplitude=amp / far, phase=phi, z_piezo=(gap + 1.0) / far,
+                 segment=seg, quality_factor=Q, spring_constant_n_per_m=K_N,
+                 resonance_frequency_hz=F0, length_m=length_m * far,
+                 drive_frequency_hz=F0), 1.0 / far
+
+
+def test_a_ramp_started_within_reach_of_the_tail_needs_the_free_scale():
+    """An 8 nm curve whose ramp starts 10 nm out, within reach of a charged tip's tail: the
+    far end is 12 % below free and 30 deg off (session 8: 16 %, 35 deg). With the true law
+    held fixed, the fitted free-amplitude scale is the true one (free / far-end amplitude) and
+    the curve is reproduced; held at 1, no surface position and drive frequency can."""
+    length = 8e-9
+    law = CurveLaw(a0=0.3e-9 / length, vdw=2e-6, stiffness=40.0, electrostatic=5e-3,
+                   radius=10e-9 / length)
+    curve, scale = _tail_curve(law, length)
+    assert 1.1 < scale < 1.2 and abs(curve.free_phase - math.pi / 2) > math.radians(20)
+    held = GroupFitter(fixed_law=(law, length)).fit([curve])
+    free = GroupFitter(fixed_law=(law, length), free_scale=True).fit([curve])
+    assert free.values_["curves"][0]["free_scale"] == pytest.approx(scale, rel=1e-4)
+    assert free.values_["curves"][0]["offset"] * curve.length_m == pytest.approx(
+        1.0 * length, rel=1e-4)
+    # noiseless: the model's own residual (floor sigma) against 1e5 held at 1 (measured
+    # 2e-4 and 3.6e5)
+    assert free.chi2_ < 1e-2 < 1e3 < held.chi2_
+    assert "free_scale" not in held.values_["curves"][0]
+
+
+def test_the_neck_is_tested_on_the_retraction_not_on_left_out_curves():
+    """A neck shows where the tip leaves the surface: the joint diagnosis names it by its
+    evidence and the retraction gain of the joint fit (not fitted) and leaves no curve out for
+    it (session 8: left-out curves that barely touch refuted 2 of 10 neck groups); a
+    non-hysteretic candidate above the threshold is still tested on left-out curves."""
+    neck = next(h for h in EXTENSIONS if h.cause == "adhesion_hysteresis")
+    assert neck.hysteretic and not VISCO.hysteretic
+    curves = [synthetic(DAMPED.replace(damping=0.0, neck=0.02), L, 1.0, seed=30 + i, n=100)
+              for i, L in enumerate((15e-9, 35e-9))]
+    d = GroupDiagnoser(hypotheses=(VISCO, neck), max_evaluations=800).fit(curves)
+    assert d.cause_ == "adhesion_hysteresis"
+    named = d.candidates_[0]
+    assert named["gain_loo"] is None and "adhesion_hysteresis" not in d.loo_
+    assert named["gain"] == named["gain_retraction"] > 0.05
+    visco = next(c for c in d.candidates_ if c["cause"] == "viscoelastic")
+    assert (visco["gain_loo"] is not None) == (visco["evidence"] > d.threshold)
