@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import logging
 import math
+from abc import ABC, abstractmethod
 from typing import final
 
 import numpy as np
@@ -18,7 +19,8 @@ from .hypotheses import BASELINE, DRIFT, FREE_SCALE, Hypothesis, Parameter
 from .law import CurveLaw
 from .model import SlowFlowModel
 
-__all__ = ["CurveFitter", "OFFSET", "wrap_phase"]
+__all__ = ["CurveFitter", "DataFarStart", "FAR_BASINS", "FarStart", "LeverFarStart", "OFFSET",
+           "SlopeFarStart", "wrap_phase"]
 
 log = logging.getLogger(__name__)
 
@@ -90,6 +92,75 @@ WORK_STEPS = 1000
 #: rest gap (/ free amplitude) beyond which the approach shows no conservative force, only a
 #: far loss: the points read for the far damping term's start (``_far_law_from_data``)
 FAR_GAP = 2.0
+#: fraction of the far decay's upper bound beyond which the data-read law counts as no resolved
+#: decay (a loss linear over the ramp): then the linear-slope basin is started too
+SLOPE_FRACTION = 0.5
+#: far coefficient of the linear-slope start when the data show no slope (/ the lever's own
+#: damping 1/Q): the level of the forced fits on the flat Asylum curves (0.010-0.017x, s8)
+SLOPE_LEVEL = 0.01
+
+
+class FarStart(ABC):
+    """One basin of the far damping term: its starts ``(coefficient, decay length)`` (encoded,
+    as the fit's coordinates). Each basin is refined on its own and the fit keeps the lowest
+    chi2 (``CurveFitter``): one curve's far loss fits in two or three basins (Asylum, session
+    8: ~550 nm at free-amplitude scale 1.00 and 2-5 um at ~1.1; a short race between them
+    kept the worse one on 25/48 On_Surface and 35/38 Off declining curves)."""
+
+    @abstractmethod
+    def starts(self, fitter: CurveFitter, x: NDArray[np.float64],
+               params: list[Parameter]) -> list[tuple[float, float]]:
+        """Starts of this basin around ``x`` (may be empty)."""
+
+
+@final
+class LeverFarStart(FarStart):
+    """``x``'s far term and each of the coefficient's ``alternatives`` at ``x``'s decay
+    (``FAR_DECAY_M``: 3e-4 k/omega0 over 500 nm, session 6's start)."""
+
+    def starts(self, fitter, x, params):
+        pc, c0, l0 = _far_coordinates(x, params)
+        return [(c0, l0)] + [(_enc(pc, a), l0) for a in pc.alternatives if _enc(pc, a) != c0]
+
+
+@final
+class DataFarStart(FarStart):
+    """The far law read off the approach beyond ``FAR_GAP`` (``_far_law_from_data``, session
+    7's start; needed where the loss decays over more than the ramp: a 2-3 um decay on a
+    1.2 um ramp stalled from 500 nm). None when the far points show no loss."""
+
+    def starts(self, fitter, x, params):
+        far = fitter._far_law_from_data(x)
+        if far is None:
+            return []
+        pc, pl = _far_parameters(params)
+        return [(_enc(pc, far[0]), _enc(pl, far[1]))]
+
+
+@final
+class SlopeFarStart(FarStart):
+    """The linear-slope basin, only where the data resolve no decay (the data-read law is None
+    or decays over more than ``SLOPE_FRACTION`` of the upper bound): the decay at its upper
+    bound, the coefficient read off the far points at that decay (at least ``SLOPE_LEVEL``
+    of the lever's damping). On the flat Asylum curves this basin lowered chi2 by 77-449 on
+    13/37 but no start reached it (session 8); a free-amplitude drift over the ramp makes the
+    same slope (docs/real_data.md, session 9)."""
+
+    def starts(self, fitter, x, params):
+        pc, pl = _far_parameters(params)
+        far = fitter._far_law_from_data(x)
+        if far is not None and far[1] < SLOPE_FRACTION * pl.high:
+            return []
+        hi = _enc(pl, pl.high) - 1e-6 * (abs(_enc(pl, pl.high)) + 1.0)
+        coef = fitter._far_law_from_data(x, decay=_dec(pl, hi))
+        q = fitter.model_.quality_factor
+        level = max(coef[0] if coef is not None else 0.0, SLOPE_LEVEL / q)
+        return [(_enc(pc, min(max(level, pc.low), pc.high)), hi)]
+
+
+#: the far term's basins, each refined on its own (the fit keeps the lowest chi2); the data's
+#: basins only when the free-amplitude scale starts from the data (a first extension fit)
+FAR_BASINS: tuple[FarStart, ...] = (LeverFarStart(), DataFarStart(), SlopeFarStart())
 
 
 @final
@@ -125,6 +196,10 @@ class CurveFitter:
         flow takes ``s`` > ``WORK_STEPS`` adaptive steps counts as ``s / WORK_STEPS``
         evaluations (the cap bounds the work, i.e. the CPU time, also on stiff deep contacts).
         None: no cap.
+    far_basins : sequence of FarStart
+        Basins of the far damping term (a hypothesis with one), each refined on its own
+        within an equal share of what the start scan left of the budget; the lowest chi2 is
+        kept (``FAR_BASINS``; one basin: the best-scored start of all, session 8).
 
     Attributes
     ----------
@@ -145,6 +220,9 @@ class CurveFitter:
         Amplitude and phase noise used as weights.
     n_evaluations_ : float
         Model evaluations spent (counted by their work, see ``max_evaluations``).
+    basins_ : list of (float, dict)
+        Chi2 and fitted values of each far basin refined (best first; one entry without a
+        far term).
     """
 
     def __init__(self, *, hypothesis: Hypothesis | None = None, a0_m: float = 0.3e-9,
@@ -152,7 +230,8 @@ class CurveFitter:
                  max_nfev: int = 60, start: dict | None = None,
                  step: float = 4.0 * math.pi, n_starts: int = 1,
                  rescales: tuple[tuple[float, float], ...] = RESCALES,
-                 max_evaluations: int | None = None) -> None:
+                 max_evaluations: int | None = None,
+                 far_basins: tuple[FarStart, ...] = FAR_BASINS) -> None:
         if hypothesis is not None and not isinstance(hypothesis, Hypothesis):
             raise ValueError(f"hypothesis must be a Hypothesis, got {type(hypothesis).__name__}")
         for name, v in (("a0_m", a0_m), ("tip_radius_m", tip_radius_m)):
@@ -179,6 +258,11 @@ class CurveFitter:
         if max_evaluations is not None and int(max_evaluations) < 1:
             raise ValueError(f"max_evaluations must be >= 1 or None, got {max_evaluations!r}")
         self.max_evaluations = None if max_evaluations is None else int(max_evaluations)
+        far_basins = tuple(far_basins)
+        if not far_basins or not all(isinstance(b, FarStart) for b in far_basins):
+            raise ValueError(f"far_basins must be a non-empty sequence of FarStart, "
+                             f"got {far_basins!r}")
+        self.far_basins = far_basins
 
     # ------------------------------------------------------------------ public API
     def fit(self, curve: Curve, *, mask: NDArray[np.bool_] | None = None) -> CurveFitter:
@@ -199,14 +283,32 @@ class CurveFitter:
         self._params = params
         self.n_evaluations_ = 0
         self._unit = 1.0  # the work of the last evaluation (in evaluations)
-        starts = self._start(curve, params)
+        self._share: float | None = None
+        basins = self._start(curve, params)
+        starts = [x for b in basins for x in b]
         w0 = self.model_.omega
         lo = np.array([self._offset_bounds[0], w0 - 0.005] + [_enc(p, p.low) for p in params])
         hi = np.array([self._offset_bounds[1], w0 + 0.005] + [_enc(p, p.high) for p in params])
         self._lo, self._hi = lo, hi
-        best = self._race(starts)
-        if best is not None:
-            best = self._polish(best)
+        best, done = None, []
+        basins = [b for b in basins if b]
+        log.debug("%s: %d basins, %.0f of %s evaluations spent on the starts",
+                  "baseline" if self.hypothesis is None else self.hypothesis.cause,
+                  len(basins), self.n_evaluations_, self.max_evaluations)
+        for i, b in enumerate(basins):
+            if self.max_evaluations is not None:
+                # an equal share of what is left for each basin not yet refined
+                self._share = self.n_evaluations_ + (
+                    self.max_evaluations - self.n_evaluations_) / (len(basins) - i)
+            res = self._race(b)
+            if res is not None:
+                res = self._polish(res)
+                done.append(res)
+                if best is None or res.cost < best.cost * (1.0 - TIE_TOLERANCE):
+                    best = res
+        self._share = None
+        self.basins_ = [(2.0 * r.cost, self._values(r.x))
+                        for r in sorted(done, key=lambda r: r.cost)]
         x = best.x if best is not None else np.clip(starts[0], lo, hi)
         self._set(x)
         r = self._residual(x)
@@ -217,8 +319,10 @@ class CurveFitter:
     def _remaining(self) -> float | None:
         if self.max_evaluations is None:
             return None
-        # one evaluation (of the last one's work) is kept for the final residual
-        return self.max_evaluations - self._unit - self.n_evaluations_
+        # one evaluation (of the last one's work) is kept for the final residual; a basin's
+        # refinement stops at its share (``_share``)
+        limit = self.max_evaluations if self._share is None else self._share
+        return limit - self._unit - self.n_evaluations_
 
     def _count(self, model: SlowFlowModel) -> None:
         """Count one evaluation of ``model`` by its work (``WORK_STEPS``)."""
@@ -401,9 +505,10 @@ class CurveFitter:
         self.offset_ = self.values_[OFFSET]
         self.drift_ = self.values_.get(DRIFT, 0.0)
 
-    def _start(self, curve: Curve, params: list[Parameter]) -> list[NDArray[np.float64]]:
-        """Start vectors: the given start, else the ``n_starts`` best points of a scan of the
-        offset and the baseline's scales."""
+    def _start(self, curve: Curve, params: list[Parameter]) -> list[list[NDArray[np.float64]]]:
+        """Start vectors by far basin (``far_basins``; one list without a far term): around
+        the given start the ``n_starts`` best-scored candidates of each basin, else the
+        ``n_starts`` best points of a scan of the offset and the baseline's scales."""
         app = curve.segment == 0
         sel = app & (curve.amplitude > 0.2) & (curve.amplitude < 0.9)
         guess = (float(np.median(curve.z_piezo[sel] - curve.amplitude[sel])) if sel.any()
@@ -421,13 +526,17 @@ class CurveFitter:
             # attraction and stiffness rescaled
             cands = self._rescaled(x, params, with_identity=True)
             if len(cands) == 1:
-                return cands
+                return [[cands[0][1]]]
             # each candidate at its best surface position (a new term moves the surface the
             # data imply: a damping or an attraction lowers the amplitude like a nearer surface)
-            scored = [self._profiled(c) for c in cands]
-            costs = np.array([c for c, _ in scored])
-            order = np.argsort(costs, kind="stable")[: self.n_starts]
-            return [scored[int(i)][1] for i in order]
+            scored = [(b, *self._profiled(c)) for b, c in cands]
+            out = []
+            for b in sorted({b for b, _ in cands}):
+                mine = [(c, y) for k, c, y in scored if k == b]
+                costs = np.array([c for c, _ in mine])
+                order = np.argsort(costs, kind="stable")[: self.n_starts]
+                out.append([mine[int(i)][1] for i in order])
+            return out
         scan = []
         tail = [_enc(p, p.init) for p in params[2:]]
         coarse = ((1e-6, 1e-5, 1e-4), (1.0, 30.0, 1000.0))
@@ -479,13 +588,15 @@ class CurveFitter:
         # valley): the better fit is kept
         if not any(np.array_equal(x0, x) for x in out):
             out.append(x0)
-        return out
+        return [out]
 
-    def _far_law_from_data(self, x: NDArray[np.float64]) -> tuple[float, float] | None:
+    def _far_law_from_data(self, x: NDArray[np.float64], *, decay: float | None = None
+                           ) -> tuple[float, float] | None:
         """``(coefficient, decay length)`` of a far damping term read off the fitted approach
         points at rest gaps beyond ``FAR_GAP`` (under ``x``'s surface position), where the
         amplitude follows the steady state ``s |D0| / |1 - W**2 + i W (1/Q + c exp(-z/l))|``
         (``s`` the free-amplitude scale); None with too few points or no loss found.
+        ``decay`` (/ free amplitude): that decay held, only the coefficient read.
 
         A start, not a fit: one model evaluation cannot walk from a far term of the wrong decay
         (measured: a 2-3 um decay on a 1.2 um ramp, the fit from 500 nm stalled at chi2
@@ -508,7 +619,14 @@ class CurveFitter:
             return y[0] * d0 / np.hypot(1.0 - w * w, w * (1.0 / q + g)) - a
 
         best = None
-        for length in (0.5, 2.0, 5.0):  # decay lengths tried [um]
+        if decay is not None:
+            ld = math.log10(decay)
+            res = optimize.least_squares(lambda y: resid(np.array([y[0], y[1], ld])),
+                                         np.array([1.0, math.log10(0.1 / q)]),
+                                         bounds=([0.9, -8.0], [3.0, -1.0]))
+            best = res
+            best.x = np.array([res.x[0], res.x[1], ld])
+        for length in () if decay is not None else (0.5, 2.0, 5.0):  # decays tried [um]
             y0 = np.array([1.0, math.log10(0.1 / q), min(max(math.log10(
                 length * 1e-6 / c.length_m), lo_l + 1e-6), hi_l - 1e-6)])
             res = optimize.least_squares(resid, y0, bounds=([0.9, -8.0, lo_l], [3.0, -1.0, hi_l]))
@@ -521,25 +639,12 @@ class CurveFitter:
         return coef, decay
 
     def _far_starts(self, x: NDArray[np.float64], params: list[Parameter], *,
-                    data: bool) -> list[tuple[float, float]]:
-        """Starts ``(coefficient, decay length)`` (encoded) of the far damping term: ``x``'s,
-        each of the coefficient's ``alternatives`` at ``x``'s decay (``FAR_DECAY_M``: 3e-4
-        k/omega0 over 500 nm, session 6's start), and, with ``data``, the far law read off the
-        approach (``_far_law_from_data``, session 7's start).
-
-        Both kinds are kept: the data's law alone (session 7) left the far term off on 12 of 45
-        Asylum On_Surface damping fits at 128-172 nm free amplitude, where it scored worse than
-        the term off and session 6's start found it (median held-out gain on the 172 nm curves
-        0.55 -> 0.32); the data's law is needed where the far loss decays over more than the
-        ramp (a 2-3 um decay on a 1.2 um ramp stalled from 500 nm)."""
-        idx = {p.field: 2 + i for i, p in enumerate(params)}
-        pc, pl = params[idx["far_damping"] - 2], params[idx["far_decay_length"] - 2]
-        c0, l0 = float(x[idx["far_damping"]]), float(x[idx["far_decay_length"]])
-        out = [(c0, l0)] + [(_enc(pc, a), l0) for a in pc.alternatives if _enc(pc, a) != c0]
-        far = self._far_law_from_data(x) if data else None
-        if far is not None:
-            out.append((_enc(pc, far[0]), _enc(pl, far[1])))
-        return out
+                    data: bool) -> list[list[tuple[float, float]]]:
+        """Starts ``(coefficient, decay length)`` (encoded) of the far damping term, one list
+        per basin of ``far_basins``; without ``data`` only the basins that read nothing off the
+        data (``LeverFarStart``: a refinement from a fit's own solution)."""
+        return [b.starts(self, x, params) if data or isinstance(b, LeverFarStart) else []
+                for b in self.far_basins]
 
     def _free_scale_start(self, x: NDArray[np.float64]) -> float:
         """Free-amplitude scale that makes the steady amplitude at the first rest gap 1 under
@@ -554,11 +659,12 @@ class CurveFitter:
         return math.hypot(1.0 - w * w, w * (1.0 / q + g)) / math.hypot(1.0 - w * w, w / q)
 
     def _rescaled(self, x: NDArray[np.float64], params: list[Parameter], *,
-                  with_identity: bool) -> list[NDArray[np.float64]]:
-        """Candidates around ``x``: the hypothesis' parameters at each of their starting
-        values (the start's or ``init``, then ``alternatives``) times the ``rescales`` of
-        ``vdw`` and ``stiffness``; a changed contact exponent keeps the force at
-        ``DELTA_REF``."""
+                  with_identity: bool) -> list[tuple[int, NDArray[np.float64]]]:
+        """Candidates around ``x`` as ``(basin, vector)``: the hypothesis' parameters at each of
+        their starting values (the start's or ``init``, then ``alternatives``) times the
+        ``rescales`` of ``vdw`` and ``stiffness``; a changed contact exponent keeps the force
+        at ``DELTA_REF``. ``basin``: the index in ``far_basins`` of the far term's start (0
+        without a far term)."""
         idx = {p.field: 2 + i for i, p in enumerate(params)}
         extra = [p for p in params if p.field not in ("vdw", "stiffness")]
         # a free-amplitude scale not given by the start: the one that puts the model's
@@ -567,12 +673,18 @@ class CurveFitter:
         # one choice per parameter (its values, encoded), the far term's coefficient and decay
         # as one joint choice (``_far_starts``)
         groups: list[tuple[tuple[str, ...], list[tuple[float, ...]]]] = []
+        basin_of: dict[tuple[float, ...], int] = {}
         for p in extra:
             if p.field == "far_decay_length" and "far_damping" in idx:
                 continue
             if p.field == "far_damping" and "far_decay_length" in idx:
-                groups.append((("far_damping", "far_decay_length"),
-                               self._far_starts(x, params, data=scale)))
+                starts = []
+                for b, pairs in enumerate(self._far_starts(x, params, data=scale)):
+                    for pair in pairs:
+                        if pair not in basin_of:
+                            basin_of[pair] = b
+                            starts.append(pair)
+                groups.append((("far_damping", "far_decay_length"), starts))
                 continue
             xi = float(x[idx[p.field]])
             groups.append(((p.field,), [(xi,)] + [(_enc(p, a),) for a in p.alternatives
@@ -580,7 +692,9 @@ class CurveFitter:
         # the exponent the given stiffness belongs to
         e0 = (self.start or {}).get("exponent", self._base.exponent)
         out = []
+        far = [i for i, (f, _) in enumerate(groups) if f == ("far_damping", "far_decay_length")]
         for combo in itertools.product(*(values for _, values in groups)):
+            basin = basin_of[combo[far[0]]] if far else 0
             y = x.copy()
             for (fields, _), vals in zip(groups, combo, strict=True):
                 for f, v in zip(fields, vals, strict=True):
@@ -596,11 +710,11 @@ class CurveFitter:
                 z = y.copy()
                 z[idx["vdw"]] += math.log10(fv)
                 z[idx["stiffness"]] += math.log10(fs) + de * math.log10(DELTA_REF)
-                out.append(z)
+                out.append((basin, z))
         if not with_identity:
-            out = [z for z in out if not np.allclose(z, x)]
-        elif not any(np.allclose(z, x) for z in out):
-            out.insert(0, x.copy())
+            out = [(b, z) for b, z in out if not np.allclose(z, x)]
+        elif not any(np.allclose(z, x) for _, z in out):
+            out.insert(0, (0, x.copy()))
         return out
 
 
@@ -634,6 +748,20 @@ def _linear_ramp(curve: Curve, mask: NDArray[np.bool_]):
         return None
     return (float(tm[0]), float(slope), float(icpt), tm, curve.amplitude[idx],
             curve.phase[idx])
+
+
+def _far_parameters(params: list[Parameter]) -> tuple[Parameter, Parameter]:
+    """The far damping's coefficient and decay parameters among ``params``."""
+    p = {q.field: q for q in params}
+    return p["far_damping"], p["far_decay_length"]
+
+
+def _far_coordinates(x: NDArray[np.float64], params: list[Parameter]
+                     ) -> tuple[Parameter, float, float]:
+    """The far coefficient's parameter and ``x``'s encoded far coefficient and decay."""
+    idx = {p.field: 2 + i for i, p in enumerate(params)}
+    return (params[idx["far_damping"] - 2], float(x[idx["far_damping"]]),
+            float(x[idx["far_decay_length"]]))
 
 
 def _enc(p: Parameter, v: float) -> float:

@@ -188,7 +188,7 @@ def test_exponent_starts_hold_the_contact_force_at_the_reference_indentation():
     fit = CurveFitter(a0_m=0.015 * LENGTH, hypothesis=geometry, rescales=((1.0, 1.0),),
                       start={"vdw": 1e-5, "stiffness": 20.0}, max_evaluations=5).fit(curve)
     x = np.array([0.3, 1.0, math.log10(1e-5), math.log10(20.0), 1.5])
-    cands = fit._rescaled(x, fit._params, with_identity=False)
+    cands = [c for _, c in fit._rescaled(x, fit._params, with_identity=False)]
     exps = sorted(c[4] for c in cands)
     assert exps == pytest.approx([1.2, 2.5])  # the alternatives (the start's 1.5 is x)
     for c in cands:  # stiffness * DELTA_REF**exponent unchanged: same force at DELTA_REF
@@ -347,10 +347,11 @@ def test_free_scale_finds_no_loss_where_there_is_none():
 
 
 def test_far_starts_keep_the_fixed_start_and_the_data_read_law():
-    """The far term's starts are x's (off), session 6's (3e-4 k/omega0 over 500 nm) and the
-    law read off the far approach: the data's law alone left the far term off on 12 large
+    """The far term's basins: x's start (off) and session 6's (3e-4 k/omega0 over 500 nm), and
+    the law read off the far approach: the data's law alone left the far term off on 12 large
     amplitude Asylum On_Surface fits (session 7), session 6's alone cannot reach decays longer
-    than the ramp. Each start comes with every combination of the other parameters."""
+    than the ramp. A decay resolved by the data starts no linear-slope basin. Each start comes
+    with every combination of the other parameters, labelled by its basin."""
     from afmlearn.curves.hypotheses import FAR_DECAY_M, FAR_OFF
 
     curve = _large_amplitude_curve()
@@ -361,20 +362,22 @@ def test_far_starts_keep_the_fixed_start_and_the_data_read_law():
     idx = {p.field: 2 + i for i, p in enumerate(params)}
     x = np.array([1.3, 1.0] + [math.log10(p.init) if p.log else p.init for p in params])
     lu = curve.length_m
-    starts = [(10.0 ** c, 10.0 ** d * lu) for c, d in fit._far_starts(x, params, data=True)]
-    assert len(starts) == 3
-    assert starts[0] == pytest.approx((FAR_OFF, FAR_DECAY_M), rel=1e-9)
-    assert starts[1] == pytest.approx((3e-4, FAR_DECAY_M), rel=1e-9)
+    basins = [[(10.0 ** c, 10.0 ** d * lu) for c, d in b]
+              for b in fit._far_starts(x, params, data=True)]
+    assert [len(b) for b in basins] == [2, 1, 0]
+    assert basins[0][0] == pytest.approx((FAR_OFF, FAR_DECAY_M), rel=1e-9)
+    assert basins[0][1] == pytest.approx((3e-4, FAR_DECAY_M), rel=1e-9)
     # the law read off the points beyond 2 free amplitudes (300 nm) shows the truth's loss
     # there (measured: 0.89x at 300 nm, decay 326 nm; a start, the decay trades with the scale)
-    coef, decay = starts[2]
+    coef, decay = basins[1][0]
     assert coef * math.exp(-300e-9 / decay) == pytest.approx(3e-4 * math.exp(-300 / 450), rel=0.25)
     assert 0.5 < decay / 450e-9 < 2.0
     # without the data: x's and session 6's
-    assert len(fit._far_starts(x, params, data=False)) == 2
-    # every far start, at its own decay, combined with the near term's 2 x 3 starts
+    assert [len(b) for b in fit._far_starts(x, params, data=False)] == [2, 0, 0]
+    # every far start, at its own decay and in its basin, combined with the near term's 2 x 3
     cands = fit._rescaled(x, params, with_identity=True)
-    pairs = {(round(c[idx["far_damping"]], 9), round(c[idx["far_decay_length"]], 9))
-             for c in cands}
-    assert pairs == {(round(c, 9), round(d, 9)) for c, d in fit._far_starts(x, params, data=True)}
+    pairs = {(b, round(c[idx["far_damping"]], 9), round(c[idx["far_decay_length"]], 9))
+             for b, c in cands}
+    assert pairs == {(i, round(c, 9), round(d, 9))
+                     for i, b in enumerate(fit._far_starts(x, params, data=True)) for c, d in b}
     assert len(cands) == 2 * 3 * 3
