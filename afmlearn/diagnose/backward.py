@@ -28,8 +28,10 @@ class Removal:
     ``chi2_rise``: output-error chi2 of that refit minus the final model's; ``threshold``:
     the one the cause was named with (null threshold minus twice its prior log-odds);
     ``gain``: its held-out gain in the final model, ``1 - NRMSE(final) / NRMSE(without it)``
-    (NaN: not computed, the chi2 rise already dropped it); ``reason``: why it was dropped
-    (empty: kept).
+    (NaN: not computed, the chi2 rise already dropped it); ``decision_gain``: the gain on
+    the cause's own signature in the final model when its hypothesis measures one
+    (``AbstractHypothesis.heldout_gain``; it then decides, as in the forward step; NaN:
+    ``gain`` decided); ``reason``: why it was dropped (empty: kept).
     """
 
     cause: str
@@ -38,10 +40,16 @@ class Removal:
     gain: float
     reason: str
     note: str = ""
+    decision_gain: float = math.nan
 
     @property
     def kept(self) -> bool:
         return not self.reason
+
+    @property
+    def deciding_gain(self) -> float:
+        """The gain the decision read: ``decision_gain`` when measured, else ``gain``."""
+        return self.gain if math.isnan(self.decision_gain) else self.decision_gain
 
 
 def overwhelming(chi2_rise: float, threshold: float, dispersion: float = 1.0) -> bool:
@@ -59,14 +67,16 @@ def overwhelming(chi2_rise: float, threshold: float, dispersion: float = 1.0) ->
 
 
 def backward_keep(chi2_rise: float, threshold: float, gain: float, min_gain: float, *,
-                  dispersion: float = 1.0) -> str:
+                  dispersion: float = 1.0, own: float = math.nan) -> str:
     """The backward check's decision for one named cause: ``""`` (keep) or why it is dropped.
 
     Dropped when removing it from the final model (the rest refitted) raises chi2 by no more
     than ``threshold`` (the one it was named with), or when its held-out gain in the final
     model is not above ``min_gain`` (NaN counts as not above) while the rise is not
     :func:`overwhelming` (``dispersion``: the final model's misfit scale). A NaN rise is no
-    evidence.
+    evidence. The gain is the one the cause's forward step decided on: ``own`` (its gain on
+    its own signature, :class:`Removal` ``decision_gain``) when measured, else ``gain`` (the
+    NRMSE gain).
 
     Why an overwhelming rise is kept against the gain: the gain compares the final model with
     the final model without the cause, both refitted without the held-out set-points and
@@ -80,17 +90,26 @@ def backward_keep(chi2_rise: float, threshold: float, gain: float, min_gain: flo
     if not chi2_rise > threshold:
         return (f"chi2 rises by {chi2_rise:.1f} when it is removed from the final model, not "
                 f"above its threshold {threshold:.2f}")
-    if not gain > min_gain and not overwhelming(chi2_rise, threshold, dispersion):
-        return (f"held-out gain {gain:+.3f} in the final model, not above {min_gain:g}")
+    deciding = gain if math.isnan(own) else own
+    if not deciding > min_gain and not overwhelming(chi2_rise, threshold, dispersion):
+        return f"held-out gain {_gain_text(gain, own)} in the final model, not above {min_gain:g}"
     return ""
 
 
+def _gain_text(gain: float, own: float) -> str:
+    """``+0.123`` (the NRMSE gain decided) or ``+0.800 on its own signature (NRMSE -0.100)``."""
+    if math.isnan(own):
+        return f"{gain:+.3f}"
+    return f"{own:+.3f} on its own signature (NRMSE {gain:+.3f})"
+
+
 def _conflict(chi2_rise: float, threshold: float, gain: float, min_gain: float,
-              dispersion: float) -> str:
+              dispersion: float, own: float) -> str:
     """The note of a cause kept by its overwhelming rise against its held-out gain."""
-    if gain > min_gain or not chi2_rise > threshold:
+    if (gain if math.isnan(own) else own) > min_gain or not chi2_rise > threshold:
         return ""
-    return (f"kept although its held-out gain in the final model is {gain:+.3f}: removing it "
+    return (f"kept although its held-out gain in the final model is {_gain_text(gain, own)}: "
+            f"removing it "
             f"raises chi2 by {chi2_rise:.1f}, {chi2_rise / max(dispersion, 1.0) / threshold:.0f} "
             f"times its threshold {threshold:.2f} at the final model's misfit scale "
             f"{max(dispersion, 1.0):.2f}; the final model's held-out predictions are poor, "
@@ -99,16 +118,18 @@ def _conflict(chi2_rise: float, threshold: float, gain: float, min_gain: float,
 
 def backward_eliminate(causes: Sequence[str], thresholds: Sequence[float], min_gain: float,
                        remove: Callable[[int, tuple[int, ...]],
-                                        tuple[float, Callable[[], float], float]],
+                                        tuple[float, Callable[[], tuple[float, float]],
+                                              float]],
                        accept: Callable[[int], None]) -> tuple[list[int], list[Removal],
                                                               dict[int, Removal]]:
     """Backward elimination of named causes (indices into ``causes``, in naming order).
 
     The kept causes are checked the last named first. ``remove(i, kept)`` refits the current
     final model (the kept causes ``kept``) without cause ``i`` and returns the chi2 rise, a
-    callable giving ``i``'s held-out gain in the final model (called only when the rise is
-    above the threshold: it costs refits without the held-out set-points) and the final
-    model's misfit scale (:func:`overwhelming`). A dropped cause is
+    callable giving ``i``'s held-out gains in the final model, ``(NRMSE gain, own gain or
+    NaN)`` (called only when the rise is above the threshold: it costs refits without the
+    held-out set-points; the own gain decides when measured, :func:`backward_keep`) and the
+    final model's misfit scale (:func:`overwhelming`). A dropped cause is
     committed by ``accept(i)`` (the refit without it becomes the final model); every cause
     kept so far is then checked again against the new final model, until every kept cause
     has been checked against the current one (a pass that drops nothing).
@@ -130,12 +151,12 @@ def backward_eliminate(causes: Sequence[str], thresholds: Sequence[float], min_g
             break
         i = todo[0]
         rise, gain_of, disp = remove(i, tuple(kept))
-        gain = gain_of() if rise > thresholds[i] else math.nan
-        reason = backward_keep(rise, thresholds[i], gain, min_gain, dispersion=disp)
+        gain, own = gain_of() if rise > thresholds[i] else (math.nan, math.nan)
+        reason = backward_keep(rise, thresholds[i], gain, min_gain, dispersion=disp, own=own)
         rec = Removal(cause=causes[i], chi2_rise=float(rise), threshold=float(thresholds[i]),
-                      gain=float(gain), reason=reason,
+                      gain=float(gain), reason=reason, decision_gain=float(own),
                       note="" if reason else _conflict(rise, thresholds[i], gain, min_gain,
-                                                       disp))
+                                                       disp, own))
         if reason:
             accept(i)
             kept.remove(i)

@@ -10,7 +10,8 @@ temporary sibling + rename):
     design.md section 3 (``cause``, ``confidence``, ``baseline``, ``extended``, ``gain``,
     ``candidates``, ``causes``, ``figures``; ``causes`` the ones the backward check kept)
     plus ``dropped_causes`` (named step by step, then dropped: cause, chi2 rise on removal,
-    threshold, held-out gain, reason), ``not_separated`` (per kept cause, the candidates of
+    threshold, held-out gain, the gain that decided with its basis when the cause measures
+    its own, reason), ``not_separated`` (per kept cause, the candidates of
     its step the data do not separate from it: chi2 drops, their noise, held-out NRMSE and
     the per-set-point sign test; :mod:`.ties`), the held-out NRMSE per observation
     (``observations``), the held-out design, the contact exponent's interval, provenance,
@@ -48,6 +49,10 @@ from .ties import Tie
 __all__ = ["diagnose_trace", "report_record", "REPORT_FORMAT", "FigureWriter"]
 
 REPORT_FORMAT = "afmlearn-diagnosis-report"
+
+#: ``decision_gain_basis`` of a gain measured on a cause's own signature (a candidate's, and a
+#: kept or dropped cause's in the backward check); absent: the NRMSE gain decided
+OWN_GAIN_BASIS = "the hypothesis' own held-out signature (AbstractHypothesis.heldout_gain)"
 
 #: ``figures(diagnoser, out_dir) -> {name: path}``: draws the report's figures
 FigureWriter = Callable[[Diagnoser, Path], dict[str, Path]]
@@ -170,8 +175,7 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
         "candidates": [{"cause": c.cause, "gain": c.gain, "score": c.score,
                         **({} if math.isnan(c.decision_gain) else
                            {"decision_gain": c.decision_gain,
-                            "decision_gain_basis": "the hypothesis' own held-out signature "
-                                                   "(AbstractHypothesis.heldout_gain)"}),
+                            "decision_gain_basis": OWN_GAIN_BASIS}),
                         "evidence": c.evidence, "delta_chi2": c.delta_chi2,
                         "threshold": c.threshold, "significant": c.significant,
                         "heldout_nrmse": c.heldout_nrmse, "n_parameters": c.n_parameters,
@@ -184,6 +188,9 @@ def report_record(dg: Diagnoser, *, input_path: str | os.PathLike[str], row: int
                     "removal_chi2_rise": None if s.removal is None else s.removal.chi2_rise,
                     "removal_gain": None if s.removal is None else s.removal.gain,
                     "removal_note": None if s.removal is None else s.removal.note or None,
+                    **({} if s.removal is None or math.isnan(s.removal.decision_gain) else
+                       {"removal_decision_gain": s.removal.decision_gain,
+                        "removal_decision_gain_basis": OWN_GAIN_BASIS}),
                     **({} if math.isnan(s.decision_gain) else
                        {"decision_gain": s.decision_gain})}
                    for s in dg.causes_],
@@ -242,7 +249,9 @@ def _tie_record(cause: str, step: int, t: Tie) -> dict[str, Any]:
 
 def _removal_record(d: Removal) -> dict[str, Any]:
     return {"cause": d.cause, "chi2_rise": d.chi2_rise, "threshold": d.threshold,
-            "heldout_gain": d.gain, "reason": d.reason}
+            "heldout_gain": d.gain, "reason": d.reason,
+            **({} if math.isnan(d.decision_gain) else
+               {"decision_gain": d.decision_gain, "decision_gain_basis": OWN_GAIN_BASIS})}
 
 
 def report_markdown(rec: dict[str, Any], figs: dict[str, Path]) -> str:

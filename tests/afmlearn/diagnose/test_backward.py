@@ -97,7 +97,7 @@ def _table(chi2: dict[frozenset, float], gains: dict[tuple, float] | None = None
 
         def gain():
             gain_calls.append(i)
-            return (gains or {}).get((i, kept), 0.5)
+            return (gains or {}).get((i, kept), 0.5), math.nan     # (NRMSE gain, no own)
 
         return rise, gain, dispersion
 
