@@ -97,6 +97,13 @@ def offset_guess(curve: Curve) -> float:
             else float(np.min(curve.z_piezo[app])) - FLAT_OFFSET)
 
 
+def _closest(curve: Curve) -> float:
+    """Smallest piezo position minus amplitude on the approach (/ free amplitude): the
+    tip's closest recorded lower turning point relative to the piezo origin."""
+    app = curve.segment == 0
+    return float(np.min(curve.z_piezo[app] - curve.amplitude[app]))
+
+
 class _Budget(Exception):
     """The evaluation budget is spent (internal)."""
 
@@ -141,6 +148,10 @@ class GroupFitter:
         ``FREE_SCALE_BOUNDS``) as a nuisance: the ramp's far end, where the curve's length unit
         and free phase are measured, need not be free (a long-range force already acting
         there). False: held at 1.
+    rescan : bool
+        With ``free_scale``: each curve's surface position scanned again under the best
+        start's law (as for ``fixed_law``) before the refinement: under a long-range law the
+        surface of a curve that never touches it can lie far from the amplitude's guess.
 
     Attributes
     ----------
@@ -171,7 +182,7 @@ class GroupFitter:
                  rescales: tuple[tuple[float, float], ...] = RESCALES,
                  max_evaluations: int | None = None,
                  fixed_law: tuple[CurveLaw, float] | None = None,
-                 free_scale: bool = False) -> None:
+                 free_scale: bool = False, rescan: bool = False) -> None:
         if hypothesis is not None and not isinstance(hypothesis, Hypothesis):
             raise ValueError(f"hypothesis must be a Hypothesis, got {type(hypothesis).__name__}")
         for name, v in (("a0_m", a0_m), ("tip_radius_m", tip_radius_m), ("step", step)):
@@ -199,6 +210,7 @@ class GroupFitter:
             raise ValueError("fixed_law must be (CurveLaw, its length unit [m] > 0)")
         self.fixed_law = fixed_law
         self.free_scale = bool(free_scale)
+        self.rescan = bool(rescan)
 
     # ------------------------------------------------------------------ public API
     def fit(self, curves: Sequence[Curve]) -> GroupFitter:
@@ -234,7 +246,14 @@ class GroupFitter:
         self._g0 = [offset_guess(c) for c in curves]
         lo, hi = [], []
         for i in range(n):
-            lo += [self._g0[i] - 0.6, self._w0[i] - 0.005]
+            low = self._g0[i] - 0.6
+            if self.free_scale:
+                # a long-range force reduces the amplitude far from the surface: the surface
+                # may lie below the guess by as much as the tip stays above it at its closest
+                # (session 9: an 8 nm curve under a charged tip, its surface 0.77 free
+                # amplitudes below the guess, the tip 0.4 above the surface at the end)
+                low = min(low, _closest(curves[i]) - 0.6)
+            lo += [low, self._w0[i] - 0.005]
             hi += [self._g0[i] + 0.6, self._w0[i] + 0.005]
             if self._drift is not None:
                 lo.append(self._drift.low)
@@ -402,23 +421,38 @@ class GroupFitter:
             k = math.ceil(len(cands) * n / max(1, left // 3))
             cands = cands[::k]
         cands += [self._encode(s) for s in self.extra_starts]
-        if len(cands) == 1:
-            return cands
-        costs = [(self._cost(c), k) for k, c in enumerate(cands)]
-        costs.sort()
-        log.info("group fit %s: %d starts scored, best cost %.4g",
-                 self.hypothesis.cause if self.hypothesis else "baseline", len(cands),
-                 costs[0][0])
-        return [cands[k] for _, k in costs[: self.n_starts]]
+        if self.free_scale:
+            cands = [self._far_start(c) for c in cands]
+        if len(cands) > 1:
+            costs = [(self._cost(c), k) for k, c in enumerate(cands)]
+            costs.sort()
+            log.info("group fit %s: %d starts scored, best cost %.4g",
+                     self.hypothesis.cause if self.hypothesis else "baseline", len(cands),
+                     costs[0][0])
+            cands = [cands[k] for _, k in costs[: self.n_starts]]
+        if self.free_scale and self.rescan:
+            cands = [self._offset_scan(c)[0] for c in cands]
+        return cands
 
-    def _offset_scan(self) -> list[NDArray[np.float64]]:
+    def _offset_scan(self, x0: NDArray[np.float64] | None = None
+                     ) -> list[NDArray[np.float64]]:
         """Fixed law: each curve's surface position scanned around its guess, coarse
-        (-0.3 ... 0.3 free amplitudes, step 0.02) then fine (step 0.004) around the best:
-        whether the tip reaches the contact turns on a fraction of a nanometre."""
+        (-0.3 ... 0.3 free amplitudes, step 0.02; with free scales from the lower bound) then
+        fine (step 0.004) around the best: whether the tip reaches the contact turns on a
+        fraction of a nanometre. ``x0``: a start whose law is scanned under (default: the
+        fixed law, every nuisance at its guess)."""
         n = len(self._curves)
         k = self._n_nuis
-        x = self._encode({"law": {}, "curves": [{} for _ in range(n)]})
-        for grid in (np.linspace(-0.3, 0.3, 31), np.linspace(-0.02, 0.02, 11)):
+        x = (self._encode({"law": {}, "curves": [{} for _ in range(n)]}) if x0 is None
+             else x0.copy())
+        # with free scales, down to the lowest bound of any curve's surface (a long-range
+        # force reduces the amplitude far from the surface), same step
+        reach = min(-0.3, min(self._lo[k * i] - self._g0[i] for i in range(n))
+                    if self.free_scale else -0.3)
+        # a rescan of a joint start (every hypothesis fit with a long-range law): coarser
+        step, fine = (0.02, 0.02) if x0 is None else (0.05, 0.04)
+        coarse = np.arange(0.3, reach - 1e-9, -step)[::-1]
+        for grid in (coarse, np.linspace(-fine, fine, 11)):
             best = [(math.inf, float(x[k * i])) for i in range(n)]
             base = x.copy()
             for d in grid:
@@ -433,7 +467,51 @@ class GroupFitter:
                     best[i] = min(best[i], (float(r @ r), float(y[k * i])))
             for i in range(n):
                 x[k * i] = best[i][1]
-        return [np.clip(x, self._lo + 1e-9, self._hi - 1e-9)]
+        x = np.clip(x, self._lo + 1e-9, self._hi - 1e-9)
+        return [self._far_start(x) if self.free_scale else x]
+
+    def _far_start(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``x`` with each curve's drive frequency and free-amplitude scale set so that the
+        model's far end (the curve's free reference part, :meth:`Curve.far`) has the recorded
+        lag and amplitude under ``x``'s law: from the model's far lag ``phi`` the linear lever's
+        detuning ``D = (W/Q) / tan(phi)`` (the force gradient included), the drive frequency
+        ``W'`` with ``atan2(W'/Q, D - (W'**2 - W**2))`` the recorded lag, and the scale by the
+        amplitude ratio, corrected for the move of ``W``. One prediction of the far part per
+        curve (counted as an evaluation)."""
+        v = self._decode(x)
+        law = self._base.replace(**v["law"])
+        k = self._n_nuis
+        y = x.copy()
+        for i, c in enumerate(self._curves):
+            left = self._remaining()
+            if left is not None and left <= 0:
+                break
+            self.n_evaluations_ += 1
+            far = c.far()
+            part = c.subset(np.arange(c.n) <= far[-1])
+            a, p = _predict(rescale_law(law, self.length_m_ / c.length_m), v["curves"][i], part,
+                            self._lockins[i], self.step)
+            a_m, p_m = float(np.median(a[far])), float(np.median(p[far]))
+            a_r, p_r = float(np.median(c.amplitude[far])), c.free_phase
+            w, s = v["curves"][i][OMEGA], v["curves"][i][FREE_SCALE]
+            q = c.quality_factor
+            if not (0.0 < p_m < math.pi and 0.0 < p_r < math.pi and a_m > 0.0):
+                continue
+            d = (w / q) / math.tan(p_m)
+            # W'^2 from atan2(W'/Q, D - (W'^2 - W^2)) = p_r with W'/Q ~ W/Q
+            w2 = w * w + d - (w / q) / math.tan(p_r)
+            if w2 <= 0.0:
+                continue
+            w_new = float(np.clip(math.sqrt(w2), self._lo[k * i + 1] + 1e-9,
+                                  self._hi[k * i + 1] - 1e-9))
+            d_new = d - (w_new * w_new - w * w)
+            # the model amplitude at W' (same scale) relative to W's, linear lever
+            ratio = (math.hypot(1.0 - w_new * w_new, w_new / q)
+                     / math.hypot(1.0 - w * w, w / q)
+                     * math.hypot(d, w / q) / math.hypot(d_new, w_new / q))
+            y[k * i + 1] = w_new
+            y[k * i + k - 1] = s * a_r / (a_m * ratio)
+        return np.clip(y, self._lo + 1e-9, self._hi - 1e-9)
 
     def _single_starts(self) -> list[NDArray[np.float64]]:
         """Each curve's baseline fitted alone; each of those laws (rescaled to the group

@@ -150,7 +150,7 @@ class GroupDiagnoser:
                 f = GroupFitter(hypothesis=h, start=self.baseline_.values_,
                                 extra_starts=extra.get(h.cause, ()) if round_ == 0 else (),
                                 max_nfev=self.max_nfev, max_evaluations=share,
-                                **opts).fit(curves)
+                                rescan=h.long_range, **opts).fit(curves)
                 self._spent += f.n_evaluations_
                 log.info("group %s: chi2 %.5g (baseline %.5g)", h.cause, f.chi2_,
                          self.baseline_.chi2_)

@@ -70,6 +70,8 @@ class Parameter:
 class Hypothesis:
     """A cause and the parameters it adds to the baseline.
 
+    ``long_range``: the cause's force acts far from the surface (a joint fit rescans the
+    surface positions under its law, :class:`afmlearn.curves.group.GroupFitter` ``rescan``).
     ``hysteretic``: the cause acts between approach and retraction (the adhesion neck forms
     on contact and breaks on the way out): a joint diagnosis tests it on the retraction of the
     fitted curves, not on left-out curves (:class:`afmlearn.curves.group_diagnose.GroupDiagnoser`).
@@ -78,6 +80,7 @@ class Hypothesis:
     cause: str
     parameters: tuple[Parameter, ...]
     hysteretic: bool = False
+    long_range: bool = False
 
     def in_units(self, length_m: float) -> Hypothesis:
         """The hypothesis with every parameter in units of ``length_m`` [m]
@@ -114,11 +117,13 @@ EXTENSIONS: tuple[Hypothesis, ...] = (
                                                 alternatives=(3e-4,)),
                                       Parameter("far_decay_length", FAR_DECAY_M,
                                                 FAR_DECAY_LOW_M, 20e-6, si_length=True),
-                                      Parameter(FREE_SCALE, 1.0, 0.9, 3.0, log=False))),
+                                      Parameter(FREE_SCALE, 1.0, 0.9, 3.0, log=False)),
+               long_range=True),
     # the tail trades against the attraction: starts up to 100x the usual vdW scale, each
     # with the baseline's attraction rescaled (fit.RESCALES)
     Hypothesis("electrostatic", (Parameter("electrostatic", 1e-4, 1e-9, 1e0,
-                                           alternatives=(1e-3, 1e-2)),)),
+                                           alternatives=(1e-3, 1e-2)),),
+               long_range=True),
     Hypothesis("adhesion_hysteresis", (Parameter("neck", 0.01, 1e-5, 0.5,
                                                  alternatives=(0.003, 0.03)),),
                hysteretic=True),

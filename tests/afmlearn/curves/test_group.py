@@ -280,6 +280,13 @@ def test_a_ramp_started_within_reach_of_the_tail_needs_the_free_scale():
     # 2e-4 and 3.6e5)
     assert free.chi2_ < 1e-2 < 1e3 < held.chi2_
     assert "free_scale" not in held.values_["curves"][0]
+    # the start of a fit: from the recorded far end (scale 1, drive frequency from the far
+    # lag), one step of the linear lever's far-end match lands near the truth (measured:
+    # scale 1.146 against 1.138, drive frequency 1.0005 against 1, from 1.0019)
+    x0 = free._encode({"law": {}, "curves": [{"offset": length / curve.length_m}]})
+    assert x0[2] == 1.0 and abs(x0[1] - 1.0) > 1.5e-3
+    x1 = free._far_start(x0)
+    assert x1[2] == pytest.approx(scale, rel=0.02) and abs(x1[1] - 1.0) < 6e-4
 
 
 def test_the_neck_is_tested_on_the_retraction_not_on_left_out_curves():
