@@ -12,6 +12,7 @@ from afmlearn.io.instruments.asylum import AsylumReader
 from afmlearn.io.instruments.base import InstrumentReader
 from afmlearn.io.instruments.calibration import THERMAL_FIELDS
 from afmlearn.io.instruments.errors import MissingCalibration, RecordingError
+from afmlearn.io.instruments.fm_table import is_fm_table
 from afmlearn.io.instruments.force_curve import ForceCurve
 from afmlearn.io.instruments.nanosurf import NanosurfReader
 from afmlearn.io.instruments.table import (
@@ -58,6 +59,11 @@ def reader_for(path: str | os.PathLike[str]) -> InstrumentReader:
     if suffix == ".csv":
         if _is_binary(path):
             raise RecordingError(f"{path}: binary content, not a text CSV (wrong extension?)")
+        if is_fm_table(path):  # Δf(z, V) maps are not traces: afmlearn.fm reads them
+            raise RecordingError(f"{path}: neither a table of the column convention nor a "
+                                 "force curve but an FM frequency-shift table Δf(z, V): "
+                                 f"`python scripts/analyze_fm.py data={path}` "
+                                 "(afmlearn.fm.read_fm_spectroscopy)")
         return READERS[3] if is_convention_csv(path) else READERS[4]
     for reader in READERS:
         if suffix in reader.suffixes:

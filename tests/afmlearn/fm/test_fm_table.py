@@ -105,3 +105,11 @@ def test_real_map_and_six_bias_table_agree():
                                rtol=1e-5)
     # repulsive (Δf > 0) at the closest position: z larger = further from the sample
     assert spec.frequency_shift_hz[0, j] > 10 > spec.frequency_shift_hz[-1, j]
+
+
+def test_registry_sends_an_fm_table_to_the_fm_analysis(small):
+    from afmlearn.io.instruments import reader_for
+
+    folder, *_ = small
+    with pytest.raises(RecordingError, match="analyze_fm.py"):
+        reader_for(folder / "df_dataframe_test.csv")
