@@ -44,6 +44,7 @@ def run(tmp_path: Path, *args: str, timeout: int = 600) -> subprocess.CompletedP
                           capture_output=True, text=True, timeout=timeout)
 
 
+@pytest.mark.slow  # ~12 s CPU (six fits, a profile and figures)
 def test_synthetic_map_end_to_end(tmp_path):
     data = write_map(tmp_path / "map")
     out = tmp_path / "out"
