@@ -44,7 +44,8 @@ def main(cfg: DictConfig) -> None:
         print(f"{key:<20} held-out RMS {rep[key]['heldout_rms_hz']:.3f} Hz, "
               f"NRMSE {rep[key]['heldout_nrmse']:.4f}")
     print(f"V_cpd (apex)         {vc['value_v']:.3f} V, 95 % profile interval "
-          f"[{_v(lo)}, {_v(hi)}] V; over fit windows {vc['by_window_range_v']} V; "
+          f"[{_v(lo)}, {_v(hi)}] V; over fit windows "
+          f"[{', '.join(_v(x) for x in vc['by_window_range_v'])}] V; "
           f"far field {vc['far_v']:.3f} V")
     print(rep["final"]["equation"])
     print(f"wrote {cfg.out_dir}/report.json")

@@ -75,6 +75,8 @@ def plot_fm_curves(report: dict[str, Any], spec: FMSpectroscopy, path: Path,
                 label=f"{spec.bias_v[j]:.2f} V")
         ax.plot(z_nm, model[:, j], "-", color=color, lw=1)
     ax.plot(z_nm, bmodel[:, 0], "k:", lw=1.2, label="baseline (no electrostatics)")
+    ax.axvline(z_nm.min() + report["window"]["exclude_closest_m"] * 1e9, color="0.5", lw=0.8,
+               ls="--", label="fit window edge")
     ax.set_ylim(np.percentile(spec.frequency_shift_hz, 0.5) - 5, 60)
     ax.set_xlabel("z piezo [nm] (larger = further)")
     ax.set_ylabel("Δf [Hz]")
