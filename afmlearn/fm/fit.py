@@ -66,8 +66,12 @@ def model_hz(spec: FMSpectroscopy, law: FMLaw, *, n_nodes: int = 64) -> NDArray[
     return np.broadcast_to(out, spec.shape).copy()
 
 
+@final
 @dataclass
 class _Linear:
+    """The inner solution: the law with its linear coefficients and the residual [Hz],
+    shape (n_z * n_bias,)."""
+
     law: FMLaw
     residual: NDArray[np.float64]
 

@@ -31,6 +31,7 @@ from typing import Any, final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from afmlearn.fm.forward import law_force
 from simulator.forces.electrostatic import EPSILON_0
 from simulator.forces.law import ForceLaw, Kind, Term
 
@@ -121,8 +122,6 @@ class FMLaw:
         The far-field gradient term is a force linear in the gap; it is included relative to
         ``reference_gap_m`` (0 there), and left out when that is None.
         """
-        from afmlearn.fm.forward import law_force
-
         ell = 1e-9
         law = self.law(length_m=ell, spring_constant_n_per_m=spring_constant_n_per_m)
         d = np.asarray(gap_m, float)
