@@ -451,7 +451,9 @@ class GroupFitter:
                     if self.free_scale else -0.3)
         # a rescan of a joint start (every hypothesis fit with a long-range law): coarser
         step, fine = (0.02, 0.02) if x0 is None else (0.05, 0.04)
-        coarse = np.arange(0.3, reach - 1e-9, -step)[::-1]
+        coarse = np.arange(0.3, reach - 1e-9, -step)
+        # nearest to the guess first: a scan cut short by the budget keeps the near positions
+        coarse = coarse[np.argsort(np.abs(coarse), kind="stable")]
         for grid in (coarse, np.linspace(-fine, fine, 11)):
             best = [(math.inf, float(x[k * i])) for i in range(n)]
             base = x.copy()
@@ -477,16 +479,17 @@ class GroupFitter:
         detuning ``D = (W/Q) / tan(phi)`` (the force gradient included), the drive frequency
         ``W'`` with ``atan2(W'/Q, D - (W'**2 - W**2))`` the recorded lag, and the scale by the
         amplitude ratio, corrected for the move of ``W``. One prediction of the far part per
-        curve (counted as an evaluation)."""
+        curve (15 % of the approach and the settling: all curves' together are counted as one
+        curve evaluation)."""
         v = self._decode(x)
         law = self._base.replace(**v["law"])
         k = self._n_nuis
         y = x.copy()
+        left = self._remaining()
+        if left is not None and left <= 0:
+            return x
+        self.n_evaluations_ += 1
         for i, c in enumerate(self._curves):
-            left = self._remaining()
-            if left is not None and left <= 0:
-                break
-            self.n_evaluations_ += 1
             far = c.far()
             part = c.subset(np.arange(c.n) <= far[-1])
             a, p = _predict(rescale_law(law, self.length_m_ / c.length_m), v["curves"][i], part,
