@@ -36,6 +36,7 @@ def main(cfg: DictConfig) -> None:
                          heldout_every=cfg.heldout_every, reference_vcpd_v=cfg.reference_vcpd_v,
                          profile_points=cfg.profile_points,
                          window_variants_m=tuple(cfg.window_variants_m),
+                         jackknife_blocks=cfg.jackknife_blocks,
                          figures=fm_figures if cfg.figures else None, **calib)
     vc = rep["vcpd"]
     lo, hi = vc["interval_95_v"]
@@ -47,6 +48,9 @@ def main(cfg: DictConfig) -> None:
           f"[{_v(lo)}, {_v(hi)}] V; over fit windows "
           f"[{', '.join(_v(x) for x in vc['by_window_range_v'])}] V; "
           f"far field {vc['far_v']:.3f} V")
+    if vc["jackknife"] is not None:
+        jlo, jhi = vc["jackknife"]["interval_95_v"]
+        print(f"V_cpd jackknife      {jlo:.3f} .. {jhi:.3f} V (95 %, row blocks left out)")
     print(rep["final"]["equation"])
     print(f"wrote {cfg.out_dir}/report.json")
 

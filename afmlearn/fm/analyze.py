@@ -88,10 +88,29 @@ def _residual_structure(spec: FMSpectroscopy, law: FMLaw) -> dict[str, Any]:
             "even_in_bias_rms_hz": float(np.sqrt(np.mean(even**2))) if even.size else None}
 
 
+def _jackknife_vcpd(win: FMSpectroscopy, law: FMLaw, bounds: tuple[float, float],
+                    n_blocks: int) -> dict[str, Any] | None:
+    """Delete-a-block jackknife of ``V_cpd``: refit without each of ``n_blocks`` contiguous
+    row blocks; standard error and a normal 95 % interval."""
+    if n_blocks == 0:
+        return None
+    if n_blocks < 3 or win.shape[0] < 2 * n_blocks:
+        raise ValueError(f"jackknife_blocks must be 0 or 3..{win.shape[0] // 2}, got {n_blocks}")
+    blocks = np.array_split(np.arange(win.shape[0]), n_blocks)
+    values = []
+    for block in blocks:
+        keep = np.setdiff1d(np.arange(win.shape[0]), block)
+        values.append(FMFit(contact_bounds_m=bounds).fit(win.rows(keep), initial=law).law_.vcpd_v)
+    v = np.asarray(values)
+    se = math.sqrt((n_blocks - 1) / n_blocks * float(np.sum((v - v.mean()) ** 2)))
+    return {"values_v": v.tolist(), "se_v": se,
+            "interval_95_v": [law.vcpd_v - 1.96 * se, law.vcpd_v + 1.96 * se]}
+
+
 def analyze_fm(data: str | os.PathLike[str] | FMSpectroscopy, out_dir: str | os.PathLike[str],
                *, exclude_closest_m: float = 3e-9, heldout_every: int = 4,
                reference_vcpd_v: float | None = None, profile_points: int = 13,
-               window_variants_m: tuple[float, ...] = (),
+               window_variants_m: tuple[float, ...] = (), jackknife_blocks: int = 0,
                figures: Callable[[dict[str, Any], FMSpectroscopy, Path], list[Path]] | None = None,
                **calibration: Any) -> dict[str, Any]:
     """Analyse a Δf(z, V) map and write ``<out_dir>/report.json`` (+ figures).
@@ -113,6 +132,9 @@ def analyze_fm(data: str | os.PathLike[str] | FMSpectroscopy, out_dir: str | os.
     window_variants_m : tuple of float
         Other ``exclude_closest_m`` values [m] whose refitted ``V_cpd`` give its systematic
         spread (the profile interval assumes independent residuals).
+    jackknife_blocks : int
+        Delete-a-block jackknife of ``V_cpd`` over this many contiguous blocks of fitted rows
+        (0: none; else >= 3): a standard error that allows for residuals correlated in z.
     figures : callable, optional
         ``figures(report, spec, out_dir) -> paths`` (``afmlearn.plots.fm.fm_figures``).
     **calibration
@@ -162,6 +184,7 @@ def analyze_fm(data: str | os.PathLike[str] | FMSpectroscopy, out_dir: str | os.
         if sub.size >= 5 and extra != exclude_closest_m:
             variants[f"{extra:.3g}"] = FMFit(contact_bounds_m=bounds).fit(
                 spec.rows(sub), initial=law).law_.vcpd_v
+    jack = _jackknife_vcpd(win, law, bounds, jackknife_blocks)
     all_rows = FMFit(contact_bounds_m=bounds).fit(spec)
     near = np.flatnonzero(z < z_min + exclude_closest_m)
     model_kelvin = kelvin_parabolas(FMSpectroscopy(
@@ -188,7 +211,7 @@ def analyze_fm(data: str | os.PathLike[str] | FMSpectroscopy, out_dir: str | os.
                  "kelvin_fitted_rows_range_v": [float(np.min(kelvin["vcpd_v"][rows][good])),
                                                 float(np.max(kelvin["vcpd_v"][rows][good]))],
                  "reference_v": reference_vcpd_v,
-                 "by_window_v": variants,
+                 "by_window_v": variants, "jackknife": jack,
                  "by_window_range_v": ([min([law.vcpd_v, *variants.values()]),
                                         max([law.vcpd_v, *variants.values()])])},
         "kelvin": {"z_piezo_m": z.tolist(), **{k: v.tolist() for k, v in kelvin.items()},

@@ -49,12 +49,14 @@ def test_synthetic_map_end_to_end(tmp_path):
     data = write_map(tmp_path / "map")
     out = tmp_path / "out"
     proc = run(tmp_path, f"data={data}", f"out_dir={out}", "exclude_closest_m=0",
-               "window_variants_m=[]", "profile_points=5", "figures=true")
+               "window_variants_m=[]", "profile_points=5", "figures=true", "jackknife_blocks=3")
     assert proc.returncode == 0, proc.stderr[-2000:]
     rep = json.loads((out / "report.json").read_text())
     assert rep["cause"] == "electrostatic"
     assert rep["extended"]["heldout_rms_hz"] < 0.5 * rep["baseline"]["heldout_rms_hz"]
     assert rep["vcpd"]["value_v"] == pytest.approx(1.75, abs=0.1)
+    lo, hi = rep["vcpd"]["jackknife"]["interval_95_v"]
+    assert lo - 0.05 < 1.75 < hi + 0.05
     assert all((out / f).is_file() for f in rep["figures"]) and len(rep["figures"]) == 3
     assert "V_cpd (apex)" in proc.stdout
 
@@ -85,7 +87,7 @@ def test_real_map_names_electrostatics_and_a_cpd_near_the_authors(tmp_path):
     out = tmp_path / "out"
     proc = run(tmp_path, f"data={REAL}", f"out_dir={out}", "spring_constant_n_per_m=1800",
                "amplitude_m=0.5e-9", "resonance_frequency_hz=19796.5", "window_variants_m=[]",
-               "profile_points=5", "figures=false", timeout=1800)
+               "profile_points=5", "figures=false", "jackknife_blocks=0", timeout=1800)
     assert proc.returncode == 0, proc.stderr[-2000:]
     rep = json.loads((out / "report.json").read_text())
     assert rep["cause"] == "electrostatic" and rep["gain"] > 0.5
