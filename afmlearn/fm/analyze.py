@@ -10,9 +10,13 @@ Steps (report.json keys in brackets):
    without electrostatics, the same law with the electrostatic terms at ``V_cpd = 0``, and the
    extended law with a fitted ``V_cpd`` [``baseline``, ``baseline_vcpd0``, ``extended``,
    ``gain``, ``cause``];
-4. the extended law refitted on all columns, the profile interval of ``V_cpd``, the model's
-   own CPD(z) and the residual structure (by distance; odd in the bias about ``V_cpd``:
-   drift along the bias sweep or bias-dependent short-range forces) [``vcpd``, ``residual``].
+4. the extended law refitted on all columns, the profile interval of ``V_cpd`` (and the
+   spread over fit windows, a row-block jackknife), the model's own CPD(z) and the residual
+   structure (by distance; odd in the bias about ``V_cpd``: drift along the bias sweep or
+   bias-dependent short-range forces) [``vcpd``, ``residual``];
+5. all rows: one law refitted from scratch [``all_rows``], and staged: the window's
+   electrostatics held and a bias-independent short-range law (vdW + DMT) fitted to what is
+   left; what then remains in the contact rows is bias-dependent [``staged``].
 """
 
 from __future__ import annotations
@@ -72,14 +76,19 @@ def _entry(fit: FMFit, spec_test: FMSpectroscopy) -> dict[str, Any]:
 
 
 def _residual_structure(spec: FMSpectroscopy, law: FMLaw) -> dict[str, Any]:
-    """Residual RMS by distance and its part odd in the bias about ``V_cpd``."""
-    res = spec.frequency_shift_hz - model_hz(spec, law)
+    """Residual of ``law`` on ``spec``: :func:`_residual_parts` about the law's ``V_cpd``."""
+    return _residual_parts(spec.frequency_shift_hz - model_hz(spec, law), spec.bias_v,
+                           law.vcpd_v)
+
+
+def _residual_parts(res: NDArray[np.float64], bias: NDArray[np.float64], vcpd: float
+                    ) -> dict[str, Any]:
+    """RMS of a residual (n_z, n_bias) [Hz], by row, and its parts even and odd in the bias
+    about ``vcpd`` (each column paired with its mirror ``2 vcpd - V`` where one exists)."""
     row_rms = np.sqrt(np.mean(res**2, axis=1))
-    # odd part: pair each column with its mirror 2 V_cpd - V (nearest column), where it exists
-    v = spec.bias_v
-    mirror = 2.0 * law.vcpd_v - v
-    j = np.abs(v[None, :] - mirror[:, None]).argmin(axis=1)
-    ok = np.abs(v[j] - mirror) <= 0.5 * np.min(np.abs(np.diff(np.sort(v))))
+    mirror = 2.0 * vcpd - bias
+    j = np.abs(bias[None, :] - mirror[:, None]).argmin(axis=1)
+    ok = np.abs(bias[j] - mirror) <= 0.5 * np.min(np.abs(np.diff(np.sort(bias))))
     odd = 0.5 * (res[:, ok] - res[:, j[ok]])
     even = 0.5 * (res[:, ok] + res[:, j[ok]])
     return {"rms_hz": float(np.sqrt(np.mean(res**2))),
@@ -187,6 +196,14 @@ def analyze_fm(data: str | os.PathLike[str] | FMSpectroscopy, out_dir: str | os.
     jack = _jackknife_vcpd(win, law, bounds, jackknife_blocks)
     all_rows = FMFit(contact_bounds_m=bounds).fit(spec)
     near = np.flatnonzero(z < z_min + exclude_closest_m)
+    # staged: the window's electrostatics held, one bias-independent short-range law (vdW +
+    # DMT, own contact position and radius) fitted to what is left on all rows
+    es_map = model_hz(spec, law)
+    left = FMSpectroscopy(spec.frequency_shift_hz - es_map, z, spec.bias_v,
+                          spec.spring_constant_n_per_m, spec.amplitude_m,
+                          spec.resonance_frequency_hz)
+    short = FMFit(electrostatic=False, contact_bounds_m=bounds).fit(left)
+    staged_res = left.frequency_shift_hz - short.predict_hz(left)
     model_kelvin = kelvin_parabolas(FMSpectroscopy(
         model_hz(spec, law), z, spec.bias_v, spec.spring_constant_n_per_m, spec.amplitude_m,
         spec.resonance_frequency_hz))
@@ -224,6 +241,12 @@ def analyze_fm(data: str | os.PathLike[str] | FMSpectroscopy, out_dir: str | os.
                      "excluded_rows": (_residual_structure(spec.rows(near), all_rows.law_)
                                        if near.size else None)},
     }
+    report["staged"] = {
+        "equation": equation(short.law_), "law": short.law_.to_dict(),
+        "rms_hz": float(np.sqrt(np.mean(staged_res**2))),
+        "row_rms_hz": np.sqrt(np.mean(staged_res**2, axis=1)).tolist(),
+        "excluded_rows": (_residual_parts(staged_res[near], spec.bias_v, law.vcpd_v)
+                          if near.size else None)}
     report["figures"] = ([str(p.relative_to(out)) for p in figures(report, spec, out)]
                          if figures is not None else [])
     write_json(out / "report.json", jsonable(report))
