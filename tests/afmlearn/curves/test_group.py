@@ -305,3 +305,32 @@ def test_the_neck_is_tested_on_the_retraction_not_on_left_out_curves():
     assert named["gain"] == named["gain_retraction"] > 0.05
     visco = next(c for c in d.candidates_ if c["cause"] == "viscoelastic")
     assert (visco["gain_loo"] is not None) == (visco["evidence"] > d.threshold)
+
+
+def test_the_surface_of_a_curve_held_off_by_the_tail_is_found_below_the_amplitude_guess():
+    """A strong tail at 6.7 nm free amplitude (the bench's 8 nm electrostatic member): the
+    amplitude falls to 4 % without the tip reaching the surface, so the amplitude-based
+    surface guess is one free amplitude too far out (measured 2.03 against 1.0). With free
+    scales the surface bound reaches down to the tip's closest turning point - 0.6 and the
+    scan goes there: the true law held fixed reproduces the curve (measured chi2 2e-14); the
+    old +-0.3 scan (free scales off) stays near the guess (chi2 6e7)."""
+    from afmlearn.curves.group import offset_guess
+
+    length = 6.7e-9
+    law = CurveLaw(a0=0.3e-9 / length, vdw=3e-4, stiffness=4.5, electrostatic=0.05,
+                   radius=10e-9 / length)
+    n = 80
+    tau = 2 * math.pi * 6 * np.arange(2 * n)
+    gap = np.concatenate([np.linspace(2.7, 0.43, n), np.linspace(0.43, 2.7, n)])
+    model = SlowFlowModel(quality_factor=Q, omega=1.0, drive=1.0 / Q, step=4 * math.pi)
+    amp, phi = model.predict(law, tau, gap)
+    curve = Curve(tau=tau, amplitude=amp, phase=phi, z_piezo=gap + 1.0,
+                  segment=np.repeat(np.array([0, 1], dtype=np.int8), n), quality_factor=Q,
+                  spring_constant_n_per_m=K_N, resonance_frequency_hz=F0, length_m=length,
+                  drive_frequency_hz=F0)
+    assert offset_guess(curve) > 1.9 and amp.min() < 0.05
+    wide = GroupFitter(fixed_law=(law, length), free_scale=True).fit([curve])
+    assert wide.values_["curves"][0]["offset"] == pytest.approx(1.0, abs=1e-3)
+    assert wide.chi2_ < 1e-2
+    old = GroupFitter(fixed_law=(law, length)).fit([curve])
+    assert old.values_["curves"][0]["offset"] > 1.5 and old.chi2_ > 1e3
