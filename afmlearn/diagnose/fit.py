@@ -507,9 +507,14 @@ def refine_output_error(oe: OutputError, starts: Sequence[Solution],
     converged, and the structure (``build``, parameters) it was refined in. ``warm`` (an
     :meth:`OutputError.snapshot`): every start is shot from those orbits, not from the ones
     the start refined before it left (the result then does not depend on the starts' order).
+    ``max_nfev`` output-error evaluations per start, at least ``hyp.min_refine_nfev`` where
+    the cause sets one.
     """
     build, params = structure(hyp, base.spec, ctx)
     starts = list(starts)
+    # a cause whose fit needs more evaluations than the caller's budget says so (the JKR
+    # neck: ``min_refine_nfev``)
+    max_nfev = max(int(max_nfev), int(getattr(hyp, "min_refine_nfev", 0)))
     fallback = None
     if hyp is not None:
         nv = hyp.nested_values(params[1:])

@@ -152,3 +152,70 @@ def test_constructed_jkr_neck_series_is_named_adhesion_hysteresis(tmp_path):
     jkr = _jkr(e_star, radius, w, a0)
     truth = _loop_area_j(jkr.alpha, Neck(jkr.law().break_distance, jkr.r_j), jkr.a0, SCALES)
     assert fitted == pytest.approx(truth, rel=0.25)
+
+
+#: seed-2026 development draw 0 of the benchmark's hidden-neck series (8 set-points, 200
+#: samples/period, 1 % noise, 30 periods; not an evaluation draw)
+_DEV_NECK_0 = dict(
+    causes=("adhesion_hysteresis",), quality_factor=189.66452595467518,
+    free_amplitude_m=1.9293376565300568e-08,
+    setpoints=(0.9049329056271254, 0.8273189628791634, 0.7352516982990762, 0.6592309724116246,
+               0.5816806009280548, 0.5217505580636531, 0.4189736030189014,
+               0.34179741181841455),
+    settle_offsets=(0.6604356016971168, 0.48324353719640334, 0.42586362753841467,
+                    0.8890562134951094, 0.9382807045345221, 0.7526125215203732,
+                    0.3324654789702688, 0.738551344873965),
+    tip_radius_m=1.637089357898396e-08, hamaker_j=1.1639712623333508e-19,
+    reduced_modulus_pa=3067285065.3104353, a0_m=3.0594558652132964e-10,
+    effects={"adhesion_hysteresis": {"work_of_adhesion_j_per_m2": 0.20849022802706235}},
+    seed=1582017597)
+
+
+@pytest.mark.slow
+def test_neck_fit_reaches_the_drawn_laws_basin_on_a_series(tmp_path):
+    """On a hidden-neck series the fitted neck ends no higher than the drawn law refitted
+    (its neck length and the tip radius pinned, everything else fitted, same evaluations).
+    Session 8's starts left the neck's 10 joint evaluations short on this draw (chi2 387.6
+    against the drawn law's 372.7: the neck's snap makes the residual non-smooth), so the
+    neck lost a tie it should share; ``min_refine_nfev`` gives it 20."""
+    from typing import final
+
+    from afmlearn.diagnose import Diagnoser
+    from afmlearn.diagnose.hypotheses import AdhesionHysteresis
+    from afmlearn.diagnose.hypotheses.base import AbstractHypothesis, Parameter
+    from afmlearn.diagnose.synthetic import SeriesCase, simulate_series
+    from afmlearn.io import Experiment
+
+    case = SeriesCase(**_DEV_NECK_0)
+    path = tmp_path / "neck.h5"
+    simulate_series(case, path, samples_per_period=200, n_periods=30.0, noise_level=0.01)
+    w = case.effects["adhesion_hysteresis"]["work_of_adhesion_j_per_m2"]
+    jkr = HystereticJKR.from_si(reduced_modulus_pa=case.reduced_modulus_pa,
+                                tip_radius_m=case.tip_radius_m, work_of_adhesion_j_per_m2=w,
+                                a0_m=case.a0_m, scales=SCALES)
+    drawn_m = jkr.law().break_distance * SCALES.length
+    free = AdhesionHysteresis()
+
+    @final
+    class Pinned(AbstractHypothesis):
+        """The neck with its length held at the drawn one."""
+
+        cause = free.cause
+        n_starts, output_error_scan = free.n_starts, free.output_error_scan
+        refine_both_starts = free.refine_both_starts
+        min_refine_nfev = free.min_refine_nfev
+
+        def parameters(self, ctx):
+            v = drawn_m / ctx.length_m
+            return [Parameter("neck_length", v * (1 - 1e-6), v * (1 + 1e-6), (v,), log=True),
+                    free.parameters(ctx)[1]]
+
+        def extend(self, spec, values):
+            return free.extend(spec, values)
+
+    def chi2(h: AbstractHypothesis) -> float:
+        dg = Diagnoser(hypotheses=[h], max_causes=1, screen_chi2=0.0).fit(Experiment.read(path))
+        return float(dg.candidates_[0].chi2)
+
+    fitted, drawn = chi2(free), chi2(Pinned())
+    assert fitted <= drawn + 1.0, (fitted, drawn)
