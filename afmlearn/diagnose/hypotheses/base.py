@@ -122,6 +122,9 @@ class AbstractHypothesis(abc.ABC):
     #: energy-balance starts: how many of the extension's grid points per onset (those whose
     #: one coefficient fits the set-points' energies best) are shot and refined
     energy_scan: ClassVar[int] = 1
+    #: joint output-error refinements get at least this many evaluations (0: the diagnoser's
+    #: ``joint_nfev``; read by ``fit.refine_output_error``; the JKR neck needs 20)
+    min_refine_nfev: ClassVar[int] = 0
 
     @abc.abstractmethod
     def parameters(self, ctx: Context) -> list[Parameter]:
