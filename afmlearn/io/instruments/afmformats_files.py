@@ -3,7 +3,8 @@ Workshop ``.csv``, NT-MDT / Chiaro text, ``.tab``), as `ForceCurve` objects.
 
 afmformats already brings every format to one convention: ``force`` [N] (> 0 repulsive),
 ``height (piezo)`` / ``height (measured)`` [m] decreasing towards the sample, ``segment``
-0 approach / 1 retract, metadata ``spring constant`` [N/m], ``sensitivity`` [m/V],
+0 approach / 1 retract (curves with a dwell number it 0, 1, 2 ...: the last is the retraction,
+the dwell is kept with the approach), metadata ``spring constant`` [N/m], ``sensitivity`` [m/V],
 ``rate approach`` [Hz]. So ``z_piezo_m`` = the height (larger = further from the sample) and
 ``deflection_m = -force / k`` when k is known.
 """
@@ -37,6 +38,12 @@ class AfmformatsReader(InstrumentReader):
 
         try:
             curves = afmformats.load_data(str(path))
+        except afmformats.errors.MissingMetaDataError as err:
+            keys = ", ".join(map(str, getattr(err, "meta_keys", []) or ["?"]))
+            hint = (": an uncalibrated curve has no force channel; calibrate the deflection "
+                    "(sensitivity, spring constant) in the vendor software and export again"
+                    if "spring constant" in keys or "sensitivity" in keys else "")
+            raise RecordingError(f"{path}: the file does not state {keys}{hint}") from None
         except afmformats.errors.FileFormatNotSupportedError:
             if path.suffix.lower() in (".csv", ".txt"):
                 raise RecordingError(
@@ -56,7 +63,7 @@ class AfmformatsReader(InstrumentReader):
             meta = data.metadata
             arrays = {"force_n": np.asarray(data["force"], dtype=float),
                       "z_piezo_m": np.asarray(data[height], dtype=float),
-                      "segment": np.asarray(data["segment"], dtype=np.int8)
+                      "segment": _approach_retract(np.asarray(data["segment"]))
                       if "segment" in columns else np.zeros(len(data["force"]), np.int8)}
             if "time" in columns:
                 arrays["time_s"] = np.asarray(data["time"], dtype=float)
@@ -73,6 +80,16 @@ class AfmformatsReader(InstrumentReader):
                     header[name] = value
             out.append(Parsed("force_curve", arrays, header))
         return out
+
+
+def _approach_retract(segment: np.ndarray) -> np.ndarray:
+    """afmformats numbers a curve's segments 0, 1, 2 ... (a JPK creep-compliance curve:
+    extend, pause, retract; stress relaxation: four); the last is the retraction (1), every
+    earlier one, a dwell included, goes with the approach (0), as an Asylum dwell does."""
+    segment = segment.astype(np.int64)
+    if segment.size == 0 or segment.max() <= 1:
+        return segment.astype(np.int8)
+    return (segment == segment.max()).astype(np.int8)
 
 
 def _get(meta: Any, key: str) -> float | None:

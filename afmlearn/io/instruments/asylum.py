@@ -65,20 +65,26 @@ class AsylumReader(InstrumentReader):
     def _parse(self, path: Path, options: Mapping[str, Any]) -> Parsed:
         from igor2 import binarywave
 
-        wave = binarywave.load(str(path))["wave"]
+        loaded = binarywave.load(str(path))
+        wave = loaded["wave"]
         with np.errstate(invalid="ignore", over="ignore"):  # damaged values: checked below
             data = np.asarray(wave["wData"], dtype=float)
         note = parse_note(wave.get("note", b""))
-        labels = [_text(b) for b in (wave["labels"][1] if len(wave["labels"]) > 1 else [])]
+        dim_labels = wave.get("labels") or []  # versions 1-3 have no dimension labels
+        labels = [_text(b) for b in (dim_labels[1] if len(dim_labels) > 1 else [])]
         labels = labels[1:] if labels and labels[0] == "" else labels
         if data.ndim != 2 or not labels or data.shape[1] != len(labels):
-            raise RecordingError(f"{path}: an .ibw without labelled columns (Raw, Defl, Amp, "
-                                 f"Phase, ZSnsr ...), found shape {data.shape} and labels "
-                                 f"{labels}")
+            version = loaded.get("version", "?")
+            name = _text(wave.get("wave_header", {}).get("bname", b""))
+            raise RecordingError(
+                f"{path}: Igor wave version {version} '{name}' of shape {data.shape} with column "
+                f"labels {labels}: afmlearn reads Asylum curves saved as one 2-D wave (version "
+                "5) whose columns are labelled Raw/ZSnsr and Defl or Amp+Phase; a single-"
+                "channel wave (versions 1-3 hold only one) is not a curve")
         columns = {name: data[:, i] for i, name in enumerate(labels)}
         header = {v: note[k] for k, v in _NOTE_FIELDS.items() if _number(note.get(k))}
         if "sample_rate_hz" not in header:
-            step = float(np.asarray(wave["wave_header"]["sfA"])[0])
+            step = float(np.asarray(wave["wave_header"].get("sfA", [0.0]))[0])
             if step > 0:
                 header["sample_rate_hz"] = 1.0 / step
         if _number(note.get("InvOLS")):
@@ -87,14 +93,23 @@ class AsylumReader(InstrumentReader):
                                  f"{note.get('Date', '')} {note.get('Time', '')}".strip())
         z_source = "ZSnsr" if "ZSnsr" in columns else "Raw" if "Raw" in columns else None
         if z_source is None:
-            raise RecordingError(f"{path}: no ZSnsr or Raw column (labels {labels})")
+            raise RecordingError(f"{path}: no Z column (ZSnsr or Raw) to place the curve on; "
+                                 f"labels {labels}")
+        if _volts(columns[z_source]):
+            raise RecordingError(f"{path}: {z_source} reaches "
+                                 f"{np.nanmax(np.abs(columns[z_source])):.3g}: in volts, not "
+                                 "metres (save the curve with the Z sensor in metres)")
         arrays: dict[str, np.ndarray] = {"z_piezo_m": -columns[z_source],
                                          "segment": _segments(note, data.shape[0], path)}
         check_length("z_piezo_m", arrays["z_piezo_m"], path)
         extra = {"note": note, "labels": labels}
         if "Amp" in columns and "Phase" in columns:
             amp = columns["Amp"]
-            if np.nanmax(np.abs(amp)) > 1e-4 and _number(note.get("AmpInvOLS")):
+            if _volts(amp):
+                if not _number(note.get("AmpInvOLS")):
+                    raise RecordingError(f"{path}: Amp is in volts and the wave note has no "
+                                         "AmpInvOLS (amplitude sensitivity, m/V) to put it in "
+                                         "metres")
                 amp = amp * note["AmpInvOLS"]  # stored in volts: Amp x AmpInvOLS [m/V]
             check_length("Amp", amp, path)
             arrays.update(amplitude_m=amp, phase_rad=np.radians(columns["Phase"]))
@@ -102,8 +117,15 @@ class AsylumReader(InstrumentReader):
             return Parsed("lockin", arrays, header, extra)
         if "Defl" in columns:
             defl = columns["Defl"]
-            if np.nanmax(np.abs(defl)) > 1e-4 and _number(note.get("InvOLS")):
-                defl = defl * note["InvOLS"]  # stored in volts
+            if _volts(defl):
+                given = options.get("invols_m_per_v")
+                invols = float(given) if given is not None else note.get("InvOLS")
+                if not _number(invols):
+                    raise RecordingError(f"{path}: Defl is in volts and the wave note has no "
+                                         "InvOLS: pass invols_m_per_v=VALUE (deflection "
+                                         "sensitivity, m/V)")
+                defl = defl * float(invols)  # stored in volts
+                header["invols_m_per_v"] = float(invols)
             check_length("Defl", defl, path)
             arrays["deflection_m"] = -defl
             rate = header.get("sample_rate_hz")
@@ -123,7 +145,7 @@ def _bimodal(columns: Mapping[str, np.ndarray], note: Mapping[str, Any],
             extra["phase2_rad"] = np.radians(columns["Phas2"])
         return
     amp2 = columns["Amp2"]
-    if np.nanmax(np.abs(amp2)) > 1e-4:  # no lever oscillates by 100 um: volts
+    if _volts(amp2):
         if not _number(note.get("Amp2InvOLS")):
             logger.warning("%s: Amp2 is in volts and the note has no Amp2InvOLS; the second "
                            "lock-in is left out of the trace (extra['amplitude2_v'])", path)
@@ -176,6 +198,12 @@ def _segments(note: Mapping[str, Any], n: int, path: Path) -> np.ndarray:
             current = 0
         segment[start:stop + 1] = current
     return segment
+
+
+def _volts(values: np.ndarray) -> bool:
+    """No lever deflects or oscillates by 100 um and no Asylum Z sensor travels that far: a
+    column reaching 1e-4 is in volts (or damaged: `check_length` names NaN and inf)."""
+    return bool(np.nanmax(np.abs(values)) > 1e-4) if values.size else False
 
 
 def _number(value: Any) -> bool:

@@ -20,6 +20,7 @@ the deflection with the overrides ``column=NAME unit=UNIT``.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, final
@@ -50,23 +51,34 @@ class CsvReader(InstrumentReader):
     def _parse(self, path: Path, options: Mapping[str, Any]) -> Parsed:
         meta: dict[str, Any] = {}
         header_line, n_lines = None, 0
-        with path.open("r", encoding="utf-8", errors="strict") as f:
-            for line in f:
-                n_lines += 1
-                stripped = line.strip()
-                if stripped.startswith("#"):
-                    key, sep, value = stripped[1:].partition(":")
-                    if sep:
-                        meta[key.strip()] = value.strip()
-                    continue
-                if stripped:
-                    header_line = stripped
-                    break
+        # utf-8-sig: spreadsheet exports start with a byte-order mark
+        lines = path.read_text(encoding="utf-8-sig", errors="strict").splitlines()
+        for line in lines:
+            n_lines += 1
+            stripped = line.strip()
+            if stripped.startswith("#"):
+                key, sep, value = stripped[1:].partition(":")
+                if sep:
+                    meta[key.strip()] = value.strip()
+                continue
+            if stripped:
+                header_line = stripped
+                break
         if header_line is None:
             raise RecordingError(f"{path}: no header line with column names")
-        names = [c.strip() for c in header_line.split(",")]
+        delimiter = _delimiter(header_line)
+        names = [_column_name(c) for c in _split(header_line, delimiter)]
+        rows = [line for line in lines[n_lines:] if line.strip()
+                and not line.lstrip().startswith("#")]
+        if delimiter != ",":  # "1,5;2,0": a decimal comma (a comma never separates here)
+            rows = [line.replace(",", ".") for line in rows]
+        if delimiter != " ":  # a trailing separator ("1;2;") ends no column
+            rows = [line.rstrip().removesuffix(delimiter) for line in rows]
+        if not rows:
+            raise RecordingError(f"{path}: no rows of numbers after the header line")
         try:
-            table = np.loadtxt(path, delimiter=",", skiprows=n_lines, ndmin=2, comments="#")
+            table = np.loadtxt(rows, delimiter=None if delimiter == " " else delimiter,
+                               ndmin=2)
         except ValueError as err:
             raise RecordingError(f"{path}: not a numeric table after the header line "
                                  f"({str(err).splitlines()[0][:100]})") from None
@@ -196,18 +208,50 @@ def from_columns(columns: Mapping[str, np.ndarray], meta: Mapping[str, Any], pat
 
 
 def is_convention_csv(path: Path) -> bool:
-    """True when the first non-comment line of ``path`` names convention columns."""
+    """True when the first non-comment line of ``path`` names convention columns (separated
+    by ``,``, ``;`` or tabs; ``deflection_nm``, ``deflection [nm]`` or ``deflection (nm)``)."""
     try:
-        with path.open("r", encoding="utf-8", errors="replace") as f:
+        with path.open("r", encoding="utf-8-sig", errors="replace") as f:
             for line in f:
                 stripped = line.strip()
                 if stripped and not stripped.startswith("#"):
-                    names = [c.strip() for c in stripped.split(",")]
+                    names = [_column_name(c) for c in _split(stripped, _delimiter(stripped))]
                     return all(n.lower() == "segment" or (split_unit(n) or ("",))[0]
                                in _QUANTITIES for n in names)
     except OSError:
         return False
     return False
+
+
+def _delimiter(header: str) -> str:
+    """The column separator of a CSV header line: ``;`` or a tab when present (European
+    spreadsheet exports, which then write decimal commas), else ``,``; ``" "`` for names
+    separated by blanks only."""
+    for sep in (";", "\t", ","):
+        if sep in header:
+            return sep
+    return " "
+
+
+def _split(line: str, delimiter: str) -> list[str]:
+    cells = line.split() if delimiter == " " else line.strip().split(delimiter)
+    cells = [c.strip() for c in cells]
+    return cells[:-1] if len(cells) > 1 and cells[-1] == "" else cells  # a trailing separator
+
+
+_BRACKETED = re.compile(r"^(?P<q>[^\[\(]+?)\s*[\[\(]\s*(?P<u>[^\]\)]+?)\s*[\]\)]$")
+
+
+def _column_name(cell: str) -> str:
+    """``"deflection [nm]"``, ``"Deflection (nm)"``, ``"z piezo [µm]"``, ``"\"time_s\""``
+    -> the convention's ``deflection_nm``, ``z_piezo_um``, ``time_s``; other names as given."""
+    name = cell.strip().strip('"').strip("'").strip()
+    match = _BRACKETED.match(name)
+    if match:
+        unit = match["u"].strip().lower().replace("µ", "u").replace("μ", "u")
+        unit = {"°": "deg", "degree": "deg", "degrees": "deg"}.get(unit, unit)
+        name = "_".join(match["q"].split()) + "_" + unit
+    return name
 
 
 def _unit_kind(unit: str) -> str:
