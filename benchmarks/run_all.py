@@ -24,6 +24,7 @@ FULL = [
     ["bench_qrnn_speed.py"],
     ["bench_qrnn_accuracy.py"],
     ["bench_diagnose.py", "--calibrate"],
+    ["bench_fm_inversion.py"],
 ]
 QUICK = [
     ["bench_integrator.py", "--quick", "--no-doc"],
