@@ -54,12 +54,19 @@ class NanosurfReader(InstrumentReader):
             raise RecordingError(f"{path}: the spectrum holds {bad} negative or non-finite "
                                  f"values of {asd.size} (an amplitude spectral density is "
                                  "finite and >= 0): corrupted file?")
-        unit = str(param["Z"]["units"][0]) if "Z" in param else ""
-        if unit and unit.replace(" ", "") != "m/sqrt(Hz)":
+        section = _fft_section(param["HeaderDump"])
+        if section is None:
+            raise RecordingError(f"{path}: no 'Spectrum FFT' amplitude-spectral-density data "
+                                 "set in the .nid header (DataSet groups)")
+        unit = str(section.get("Dim2Unit", ""))
+        if unit.replace(" ", "") != "m/sqrt(Hz)":
             raise RecordingError(f"{path}: spectrum in {unit!r}, expected m/sqrt(Hz) "
                                  "(a deflection calibrated in metres)")
-        f_min = float(param["X"]["min"][0])
-        f_range = float(param["X"]["range"][0])
+        try:
+            f_min, f_range = float(section["Dim0Min"]), float(section["Dim0Range"])
+        except (KeyError, ValueError):
+            raise RecordingError(f"{path}: the spectrum's frequency axis (Dim0Min, Dim0Range) "
+                                 "is missing or not a number") from None
         freq = np.linspace(f_min, f_min + f_range, asd.size)
         info = dict(param["HeaderDump"].get("DataSet-Info", {}))
         header: dict[str, Any] = {"description": f"Nanosurf thermal tune {path.name}",
@@ -82,6 +89,20 @@ class NanosurfReader(InstrumentReader):
         if fitted:
             arrays["vendor_fit_asd_m_per_rthz"] = fitted[0]
         return Parsed("spectrum", arrays, header)
+
+
+def _fft_section(header: Mapping[str, Any]) -> Mapping[str, Any] | None:
+    """The header section of the measured thermal spectrum: the data set whose ``Frame`` is
+    ``Spectrum FFT`` and whose ``Dim2Name`` is a spectral density. A .nid may hold other
+    groups before it (a frequency sweep, images): their axes are not the spectrum's."""
+    groups = header.get("DataSet", {})
+    for g in range(int(groups.get("GroupCount", 0) or 0)):
+        for c in range(int(groups.get(f"Gr{g}-Count", 0) or 0)):
+            section = header.get(groups.get(f"Gr{g}-Ch{c}", ""), {})
+            if (section.get("Frame") == "Spectrum FFT"
+                    and "Spectral" in str(section.get("Dim2Name", ""))):
+                return section
+    return None
 
 
 def parse_quantity(text: Any) -> float | None:

@@ -305,3 +305,33 @@ def test_csv_with_ragged_rows_is_one_line(tmp_path):
     with pytest.raises(RecordingError) as err:
         open_recording(path, spring_constant_n_per_m=1.0)
     assert "numeric table" in _one_line(err) or "columns" in str(err.value)
+
+
+# --- Nanosurf .nid ----------------------------------------------------------------------------
+
+NID = DATA / "nanosurf_thermal_tune" / "thermal.nid"
+
+
+def test_nid_with_a_frequency_sweep_group_first_reads_the_thermal_spectrum(tmp_path):
+    """The spectrum's axis and unit come from its own data set, not the file's first one."""
+    from afmlearn.io.instruments.nanosurf import NanosurfReader
+
+    path = V.nid_with_sweep_first(NID, tmp_path / "sweep_first.nid")
+    a, b = NanosurfReader().parse(NID)[0], NanosurfReader().parse(path)[0]
+    np.testing.assert_array_equal(b.arrays["asd_m_per_rthz"], a.arrays["asd_m_per_rthz"])
+    np.testing.assert_array_equal(b.arrays["frequency_hz"], a.arrays["frequency_hz"])
+    assert b.header["vendor_resonance_frequency_hz"] == a.header["vendor_resonance_frequency_hz"]
+
+
+def test_nid_without_a_thermal_spectrum_is_one_line(tmp_path):
+    """A .nid whose only groups are not 'Spectrum FFT' (here renamed frames)."""
+    raw = NID.read_bytes()
+    end = raw.index(b"\n\r\n\r")
+    head = raw[:end].replace(b"Frame=Spectrum FFT", b"Frame=Spec forward")
+    path = tmp_path / "nofft.nid"
+    path.write_bytes(head + raw[end:])
+    with pytest.raises(RecordingError) as err:
+        from afmlearn.io.instruments.nanosurf import NanosurfReader
+
+        NanosurfReader().parse(path)
+    assert "Spectrum FFT" in _one_line(err)

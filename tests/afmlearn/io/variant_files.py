@@ -122,3 +122,32 @@ def jpk_with_dwell(src: Path, dst: Path) -> Path:
                                       b"segment-settings.type=constant-force-pause")
             out.writestr(name, pause)
     return dst
+
+
+def nid_with_sweep_first(src: Path, dst: Path) -> Path:
+    """The thermal-tune .nid with a 'Frequency sweep' group (amplitude in V over 170-190 kHz)
+    put before the spectrum groups: header section added, its data placed before theirs.
+    (nsfopen needs every data set of one length, so the sweep has the spectrum's.)"""
+    raw = src.read_bytes()
+    end = raw.index(b"\n\r\n\r")
+    head = raw[:end].decode("latin-1")
+    groups_old = ("GroupCount=2\r\nGr0-Name=Spectrum FFT\r\nGr0-ID=0\r\nGr0-Count=1\r\n"
+                  "Gr1-Name=Spectrum Fit\r\nGr1-ID=0\r\nGr1-Count=1\r\n"
+                  "Gr0-Ch0=DataSet-0:0\r\nGr1-Ch0=DataSet-1:0")
+    groups_new = ("GroupCount=3\r\nGr0-Name=Frequency sweep\r\nGr0-ID=0\r\nGr0-Count=1\r\n"
+                  "Gr1-Name=Spectrum FFT\r\nGr1-ID=0\r\nGr1-Count=1\r\n"
+                  "Gr2-Name=Spectrum Fit\r\nGr2-ID=0\r\nGr2-Count=1\r\n"
+                  "Gr0-Ch0=DataSet-2:0\r\nGr1-Ch0=DataSet-0:0\r\nGr2-Ch0=DataSet-1:0")
+    assert groups_old in head
+    points = int(head.split("[DataSet-0:0]")[1].split("Points=")[1].split("\r\n")[0])
+    section = (f"[DataSet-2:0]\r\nVersion=2\r\nPoints={points}\r\nLines=1\r\n"
+               "Frame=Frequency sweep\r\nCurLine=0\r\nDim0Name=Frequency\r\nDim0Unit=Hz\r\n"
+               "Dim0Range=20000\r\nDim0Min=170000\r\nDim1Range=0\r\nDim1Min=0\r\n"
+               "Dim2Name=Amplitude\r\nDim2Unit=V\r\nDim2Range=2\r\nDim2Min=-1\r\n"
+               "SaveMode=Binary\r\nSaveBits=32\r\nSaveSign=Signed\r\nSaveOrder=Intel\r\n\r\n")
+    head = head.replace(groups_old, groups_new).replace("[DataSet-0:0]",
+                                                        section + "[DataSet-0:0]")
+    body, tail = raw[end:], 2 * points * 4  # the two int32 spectra end the file
+    sweep = np.linspace(-2.0**30, 2.0**30, points).astype("<i4").tobytes()
+    dst.write_bytes(head.encode("latin-1") + body[:-tail] + sweep + body[-tail:])
+    return dst
