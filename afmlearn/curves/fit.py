@@ -118,7 +118,8 @@ class LeverFarStart(FarStart):
     """``x``'s far term and each of the coefficient's ``alternatives`` at ``x``'s decay
     (``FAR_DECAY_M``: 3e-4 k/omega0 over 500 nm, session 6's start)."""
 
-    def starts(self, fitter, x, params):
+    def starts(self, fitter: CurveFitter, x: NDArray[np.float64],
+               params: list[Parameter]) -> list[tuple[float, float]]:
         pc, c0, l0 = _far_coordinates(x, params)
         return [(c0, l0)] + [(_enc(pc, a), l0) for a in pc.alternatives if _enc(pc, a) != c0]
 
@@ -129,7 +130,8 @@ class DataFarStart(FarStart):
     7's start; needed where the loss decays over more than the ramp: a 2-3 um decay on a
     1.2 um ramp stalled from 500 nm). None when the far points show no loss."""
 
-    def starts(self, fitter, x, params):
+    def starts(self, fitter: CurveFitter, x: NDArray[np.float64],
+               params: list[Parameter]) -> list[tuple[float, float]]:
         far = fitter._far_law_from_data(x)
         if far is None:
             return []
@@ -146,7 +148,8 @@ class SlopeFarStart(FarStart):
     13/37 but no start reached it (session 8); a free-amplitude drift over the ramp makes the
     same slope (docs/real_data.md, session 9)."""
 
-    def starts(self, fitter, x, params):
+    def starts(self, fitter: CurveFitter, x: NDArray[np.float64],
+               params: list[Parameter]) -> list[tuple[float, float]]:
         pc, pl = _far_parameters(params)
         far = fitter._far_law_from_data(x)
         if far is not None and far[1] < SLOPE_FRACTION * pl.high:
