@@ -251,31 +251,37 @@ def test_far_decay_start_is_a_physical_length():
         damping.in_units(0.0)
 
 
+def _ramp_curve(law, *, length: float, top: float, seed: int, q: float = 187.0,
+                n: int = 300, periods: float = 1500.0) -> Curve:
+    """A synthetic approach/retract ramp of the slow-flow model under ``law`` (Q ``q``, free
+    amplitude ``length`` [m], ramp from ``top`` free amplitudes down to 0.3 and back over
+    ``n`` samples spanning ``2 * periods`` drive periods; 0.3 % amplitude and 0.2 deg phase
+    noise drawn with ``seed``)."""
+    rate = 72e3 * n / (2 * periods)
+    tau = 2 * np.pi * 72e3 * np.arange(n) / rate
+    half = tau[n // 2]
+    z = np.where(tau < half, top - (top - 0.3) * tau / half,
+                 0.3 + (top - 0.3) * (tau - half) / half)
+    model = SlowFlowModel(quality_factor=q, omega=1.0, drive=1.0 / q, step=4 * np.pi)
+    amp, phi = model.predict(law, tau, z - 0.3)
+    rng = np.random.default_rng(seed)
+    amp = amp + 0.003 * rng.standard_normal(n)
+    phi = phi + math.radians(0.2) * rng.standard_normal(n)
+    return Curve.from_si(amplitude_m=amp * length, phase_rad=phi,
+                         z_piezo_m=(z + 1.0) * length, segment=(tau >= half).astype(np.int8),
+                         sample_rate_hz=rate, quality_factor=q, spring_constant_n_per_m=2.7,
+                         resonance_frequency_hz=72e3)
+
+
 def _large_amplitude_curve():
     """A curve at 150 nm free amplitude (Q 187, ramp from 8 free amplitudes = 1.2 um) with a
     far-field damping of 3e-4 k/omega0 decaying over 450 nm (the Asylum lever's far law)."""
     from afmlearn.curves.transfer import rescale_law
 
-    length, q = 150e-9, 187.0
+    length = 150e-9
     law = rescale_law(TRUTH, LENGTH / length).replace(far_damping=3e-4,
                                                       far_decay_length=450e-9 / length)
-    n, periods, top = 300, 1500.0, 8.0
-    rate = 72e3 * n / (2 * periods)
-    tau = 2 * np.pi * 72e3 * np.arange(n) / rate
-    half = tau[n // 2]
-    z_piezo = np.where(tau < half, top - (top - 0.3) * tau / half,
-                       0.3 + (top - 0.3) * (tau - half) / half)
-    model = SlowFlowModel(quality_factor=q, omega=1.0, drive=1.0 / q, step=4 * np.pi)
-    amp, phi = model.predict(law, tau, z_piezo - 0.3)
-    rng = np.random.default_rng(0)
-    amp = amp + 0.003 * rng.standard_normal(n)
-    phi = phi + math.radians(0.2) * rng.standard_normal(n)
-    curve = Curve.from_si(amplitude_m=amp * length, phase_rad=phi,
-                          z_piezo_m=(z_piezo + 1.0) * length,
-                          segment=(tau >= half).astype(np.int8), sample_rate_hz=rate,
-                          quality_factor=q, spring_constant_n_per_m=2.7,
-                          resonance_frequency_hz=72e3)
-    return curve
+    return _ramp_curve(law, length=length, top=8.0, seed=0)
 
 
 def test_far_damping_is_found_at_a_large_free_amplitude():
@@ -390,24 +396,10 @@ def _far_curve(decay_m: float, level: float, *, seed: int):
     unit)."""
     from afmlearn.curves.transfer import rescale_law
 
-    length, q, n, periods, top = 100e-9, 187.0, 300, 1500.0, 12.0
+    length, q = 100e-9, 187.0
     law = rescale_law(TRUTH, LENGTH / length).replace(far_damping=level / q,
                                                       far_decay_length=decay_m / length)
-    rate = 72e3 * n / (2 * periods)
-    tau = 2 * np.pi * 72e3 * np.arange(n) / rate
-    half = tau[n // 2]
-    z = np.where(tau < half, top - (top - 0.3) * tau / half,
-                 0.3 + (top - 0.3) * (tau - half) / half)
-    model = SlowFlowModel(quality_factor=q, omega=1.0, drive=1.0 / q, step=4 * np.pi)
-    amp, phi = model.predict(law, tau, z - 0.3)
-    rng = np.random.default_rng(seed)
-    amp = amp + 0.003 * rng.standard_normal(n)
-    phi = phi + math.radians(0.2) * rng.standard_normal(n)
-    curve = Curve.from_si(amplitude_m=amp * length, phase_rad=phi,
-                          z_piezo_m=(z + 1.0) * length, segment=(tau >= half).astype(np.int8),
-                          sample_rate_hz=rate, quality_factor=q, spring_constant_n_per_m=2.7,
-                          resonance_frequency_hz=72e3)
-    return curve, law
+    return _ramp_curve(law, length=length, top=12.0, seed=seed, q=q), law
 
 
 def test_every_far_basin_is_refined_and_the_lowest_chi2_kept():
