@@ -18,7 +18,6 @@ spring (a repulsive force gradient, ``physics.md`` section 1: ``F > 0`` repulsiv
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import os
@@ -30,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from afmlearn.io.instruments.errors import MissingCalibration, RecordingError
+from afmlearn.io.instruments.table import csv_delimiter, split_cells
 
 __all__ = ["FM_FIELDS", "FMSpectroscopy", "is_fm_table", "read_fm_spectroscopy"]
 
@@ -119,14 +119,24 @@ class FMSpectroscopy:
 
 
 def _rows(path: Path) -> list[list[str]]:
+    """Non-blank lines of a text table as cells, in the dialects of the CSV reader
+    (:func:`~afmlearn.io.instruments.table.csv_delimiter`: ``,``, or ``;``/tab with decimal
+    commas; a byte-order mark; quoted cells)."""
     try:
-        with path.open("r", encoding="utf-8", errors="strict", newline="") as f:
-            rows = [r for r in csv.reader(f) if r and any(c.strip() for c in r)]
+        text = path.read_text(encoding="utf-8-sig", errors="strict")
     except (OSError, UnicodeDecodeError) as err:
         raise RecordingError(f"{path}: cannot read as a text CSV ({type(err).__name__})") from None
-    if not rows:
+    lines = [line for line in text.splitlines() if line.strip()]
+    if not lines:
         raise RecordingError(f"{path}: empty file")
-    return rows
+    sep = csv_delimiter(lines[0])
+    return [_cells(line, sep) for line in lines]
+
+
+def _cells(line: str, sep: str) -> list[str]:
+    cells = [c.strip('"').strip("'") for c in split_cells(line, sep)]
+    # "1,5;2,0": a decimal comma (a comma never separates here)
+    return cells if sep == "," else [c.replace(",", ".") for c in cells]
 
 
 def _numbers(cells: list[str], path: Path, what: str) -> NDArray[np.float64]:
@@ -157,10 +167,11 @@ def is_fm_table(path: str | os.PathLike[str]) -> bool:
     if path.suffix.lower() != ".csv" or not path.is_file():
         return False
     try:
-        with path.open("r", encoding="utf-8", errors="strict") as f:
-            head = f.readline().strip().split(",")
+        with path.open("r", encoding="utf-8-sig", errors="strict") as f:
+            line = next((x for x in f if x.strip()), "")
     except (OSError, UnicodeDecodeError):
         return False
+    head = _cells(line, csv_delimiter(line))
     return (len(head) >= 2 and head[0].strip().lower() in ("", "z")
             and all(_is_float(c) for c in head[1:]))
 

@@ -66,8 +66,8 @@ class CsvReader(InstrumentReader):
                 break
         if header_line is None:
             raise RecordingError(f"{path}: no header line with column names")
-        delimiter = _delimiter(header_line)
-        names = [_column_name(c) for c in _split(header_line, delimiter)]
+        delimiter = csv_delimiter(header_line)
+        names = [_column_name(c) for c in split_cells(header_line, delimiter)]
         rows = [line for line in lines[n_lines:] if line.strip()
                 and not line.lstrip().startswith("#")]
         if delimiter != ",":  # "1,5;2,0": a decimal comma (a comma never separates here)
@@ -215,7 +215,8 @@ def is_convention_csv(path: Path) -> bool:
             for line in f:
                 stripped = line.strip()
                 if stripped and not stripped.startswith("#"):
-                    names = [_column_name(c) for c in _split(stripped, _delimiter(stripped))]
+                    cells = split_cells(stripped, csv_delimiter(stripped))
+                    names = [_column_name(c) for c in cells]
                     return all(n.lower() == "segment" or (split_unit(n) or ("",))[0]
                                in _QUANTITIES for n in names)
     except OSError:
@@ -223,7 +224,7 @@ def is_convention_csv(path: Path) -> bool:
     return False
 
 
-def _delimiter(header: str) -> str:
+def csv_delimiter(header: str) -> str:
     """The column separator of a CSV header line: ``;`` or a tab when present (European
     spreadsheet exports, which then write decimal commas), else ``,``; ``" "`` for names
     separated by blanks only."""
@@ -233,7 +234,7 @@ def _delimiter(header: str) -> str:
     return " "
 
 
-def _split(line: str, delimiter: str) -> list[str]:
+def split_cells(line: str, delimiter: str) -> list[str]:
     cells = line.split() if delimiter == " " else line.strip().split(delimiter)
     cells = [c.strip() for c in cells]
     return cells[:-1] if len(cells) > 1 and cells[-1] == "" else cells  # a trailing separator

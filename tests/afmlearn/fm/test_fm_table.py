@@ -50,6 +50,24 @@ def test_map_folder_reads_in_si_with_the_sidecar_calibration(small):
     assert read_fm_spectroscopy(folder, amplitude_m=1e-9).amplitude_m == 1e-9
 
 
+def test_a_european_export_reads_like_the_comma_map(small, tmp_path):
+    """``;``-separated with decimal commas and a byte-order mark (spreadsheet export), the
+    same numbers as the comma map."""
+    folder, df, z, bias = small
+    eu = tmp_path / "eu"
+    eu.mkdir()
+    for name in ("df_dataframe_test.csv", "z_piezo.csv", "fm_calibration.json"):
+        text = (folder / name).read_text()
+        if name.endswith(".csv"):
+            text = "\ufeff" + text.replace(",", ";").replace(".", ",")
+        (eu / name).write_text(text, encoding="utf-8")
+    assert is_fm_table(eu / "df_dataframe_test.csv")
+    spec = read_fm_spectroscopy(eu)
+    np.testing.assert_array_equal(spec.frequency_shift_hz, df)
+    np.testing.assert_array_equal(spec.z_piezo_m, z)
+    np.testing.assert_array_equal(spec.bias_v, bias)
+
+
 def test_column_table_with_z_in_the_first_column(tmp_path):
     path = tmp_path / "all.csv"
     path.write_text("z,-0.0,1.75,4.0\n-3e-08,1,2,3\n-2.98e-08,4,5,6\n-2.96e-08,7,8,9\n")
