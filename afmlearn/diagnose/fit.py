@@ -512,11 +512,11 @@ def refine_output_error(oe: OutputError, starts: Sequence[Solution],
     """
     build, params = structure(hyp, base.spec, ctx)
     starts = list(starts)
-    # a cause whose fit needs more evaluations than the caller's budget says so (the JKR
-    # neck: ``min_refine_nfev``)
-    max_nfev = max(int(max_nfev), int(getattr(hyp, "min_refine_nfev", 0)))
     fallback = None
     if hyp is not None:
+        # a cause whose fit needs more evaluations than the caller's budget says so (the JKR
+        # neck: ``min_refine_nfev``)
+        max_nfev = max(int(max_nfev), hyp.min_refine_nfev)
         nv = hyp.nested_values(params[1:])
         vals = (base.values[0], *nv)
         spec = build(vals)
