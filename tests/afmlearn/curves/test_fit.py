@@ -289,11 +289,16 @@ def test_far_damping_is_found_at_a_large_free_amplitude():
     far-field damping of 3e-4 k/omega0 decaying over 450 nm (the Asylum lever's far law,
     docs/real_data.md): the damping fit finds the far term at its physical decay (measured
     0.25e-3 over 330-490 nm, chi2 10095 -> 856-1068 on 300 residuals). A start at 20 free amplitudes
-    (3 um, session 4) left the term off (6.8e-8) and stretched the near one to 73 nm."""
+    (3 um, session 4) left the term off (6.8e-8) and stretched the near one to 73 nm.
+
+    Budget: 600 evaluations (production: 2,500). Since every far basin gets its share of the
+    budget (session 9), 300 stopped short on some machines: chi2 2,037 at 300, 1,377 at 600
+    and 1,369 at 1,200 (AMD EPYC, OpenBLAS Haswell kernels; session 10), against 856-1,068 at
+    300 where the test was written."""
     curve = _large_amplitude_curve()
     base = CurveFitter(max_evaluations=400).fit(curve)
     damping = next(h for h in EXTENSIONS if h.cause == "long_range_damping")
-    fit = CurveFitter(hypothesis=damping, start=base.values_, max_evaluations=300).fit(curve)
+    fit = CurveFitter(hypothesis=damping, start=base.values_, max_evaluations=600).fit(curve)
     # the decay trades with the near term's (330-490 nm measured, by the iteration budget)
     assert 250e-9 < fit.law_.far_decay_length * curve.length_m < 900e-9
     assert fit.law_.far_damping == pytest.approx(3e-4, rel=0.35)
