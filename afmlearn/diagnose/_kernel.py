@@ -23,7 +23,8 @@ import numpy as np
 from simulator.forces._kernel import jkr_contact_radius_sqrt
 from simulator.integrate._kernel import CONTACT, FREE, N_WORK, NECK, integrate_one
 
-__all__ = ["simulate_model", "simulate_reference", "jkr_radius_sqrt"]
+__all__ = ["simulate_model", "simulate_reference", "jkr_radius_sqrt", "neck_state",
+           "invert_polynomial"]
 
 #: a run whose modal deflection exceeds this (units of L_ref) has blown up
 BLOWUP = 1e6
@@ -37,6 +38,53 @@ def jkr_radius_sqrt(delta: np.ndarray, r_j: float, c_j: float) -> np.ndarray:
     out = np.empty(delta.shape[0])
     for i in range(delta.shape[0]):
         out[i] = jkr_contact_radius_sqrt(delta[i], r_j, c_j)
+    return out
+
+
+@nb.njit(cache=True)
+def neck_state(z: np.ndarray, a0: float, neck_length: float) -> np.ndarray:
+    """Attached (neck) state along one period of a periodic orbit of gaps ``z`` (shape (n,)).
+
+    The tip attaches when ``z <= a0`` and detaches when ``z > a0 + neck_length``; the period is
+    swept twice so that the state at its start is the one the orbit itself leaves there.
+    """
+    n = z.shape[0]
+    out = np.zeros(n, np.bool_)
+    on = False
+    for sweep in range(2):
+        for i in range(n):
+            if z[i] <= a0:
+                on = True
+            elif z[i] > a0 + neck_length:
+                on = False
+            if sweep == 1:
+                out[i] = on
+    return out
+
+
+@nb.njit(cache=True)
+def invert_polynomial(y: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """True deflection ``x`` with ``y = x + b[0] x^2 + b[1] x^3 + ..`` at every sample of ``y``
+    (shape (n,)): Newton from ``x = y``, the slope held at ``|d| >= 0.2`` (the map's inverse
+    branch through 0), at most 30 steps, each sample until its step is below 1e-13."""
+    out = np.empty(y.shape[0])
+    for i in range(y.shape[0]):
+        x = y[i]
+        for _ in range(30):
+            g = x - y[i]
+            d = 1.0
+            xk = x                       # x^(k-1), k = 2, 3, ..
+            for j in range(b.shape[0]):
+                g += b[j] * xk * x
+                d += (j + 2.0) * b[j] * xk
+                xk *= x
+            if abs(d) < 0.2:
+                d = 0.2 if d >= 0.0 else -0.2
+            step = g / d
+            x -= step
+            if abs(step) < 1e-13:
+                break
+        out[i] = x
     return out
 
 

@@ -47,6 +47,9 @@ PhasePrior = tuple[float, float]
 
 wrap = wrap_angle  # angle(s) wrapped to (-pi, pi]: the one helper in afmlearn.preprocess
 
+#: offsets of :meth:`JointBalance.best_phase`'s grid around its start [rad]
+_PHASE_GRID = np.linspace(-np.pi, np.pi, 64, endpoint=False)
+
 
 @final
 class JointBalance:
@@ -291,7 +294,7 @@ class JointBalance:
                 out = out + (wrap(ph - pr[0]) / pr[1]) ** 2
             return out
 
-        grid = start + np.linspace(-np.pi, np.pi, 64, endpoint=False)
+        grid = start + _PHASE_GRID
         ph = float(grid[int(np.argmin(f(grid)))])
         for _ in range(8):
             c, sn = math.cos(ph), math.sin(ph)

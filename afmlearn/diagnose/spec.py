@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar, final
@@ -50,7 +51,9 @@ from afmlearn.identify.library.base import AbstractTerm
 from simulator import Scales
 from simulator.forces.law import Kind
 
+from ._kernel import invert_polynomial as _compiled_invert
 from ._kernel import jkr_radius_sqrt
+from ._kernel import neck_state as _compiled_neck_state
 
 __all__ = ["ModelSpec", "FORCE_TERM_ORDER", "AbstractExtension", "AbstractForceTerm",
            "AbstractNeck", "AbstractExtraMode", "AbstractOutputMap", "neck_state",
@@ -290,7 +293,12 @@ class ModelSpec:
 
     # ---------------------------------------------------------------- force terms
     def library(self) -> AFMLibrary:
-        """The smooth (history-free) force terms as an :class:`AFMLibrary`."""
+        """The smooth (history-free) force terms as an :class:`AFMLibrary` (built once per
+        spec: both are immutable)."""
+        return self._library
+
+    @functools.cached_property
+    def _library(self) -> AFMLibrary:
         terms: list[Any] = [InversePower(n=2), Indentation(p=float(self.contact_exponent))]
         terms += [e.term() for e in self.force_terms]
         return AFMLibrary(terms)
@@ -365,41 +373,22 @@ def neck_state(z: FloatArray, a0: float, neck_length: float | None) -> NDArray[n
     """Attached (neck) state along one period of a periodic orbit, shape (n,).
 
     The tip attaches when ``z <= a0`` and detaches when ``z > a0 + neck_length``; the period is
-    swept twice so that the state at its start is the one the orbit itself leaves there.
+    swept twice so that the state at its start is the one the orbit itself leaves there (the
+    compiled :func:`~afmlearn.diagnose._kernel.neck_state`; all False without a neck).
     """
-    n = z.size
-    out = np.zeros(n, bool)
+    z = np.ascontiguousarray(z, dtype=float).ravel()
     if neck_length is None:
-        return out
-    on = False
-    for sweep in range(2):
-        for i in range(n):
-            if z[i] <= a0:
-                on = True
-            elif z[i] > a0 + neck_length:
-                on = False
-            if sweep:
-                out[i] = on
-    return out
+        return np.zeros(z.size, bool)
+    return _compiled_neck_state(z, float(a0), float(neck_length))
 
 
 def invert_polynomial(y: FloatArray, coefficients: Sequence[float]) -> FloatArray:
-    """True deflection ``x`` with ``y = x + b_2 x^2 + b_3 x^3 + ..`` (Newton from ``x = y``;
+    """True deflection ``x`` with ``y = x + b_2 x^2 + b_3 x^3 + ..`` (Newton from ``x = y``
+    at every sample, the compiled :func:`~afmlearn.diagnose._kernel.invert_polynomial`;
     ``coefficients = (b_2, b_3, ..)``), shape of ``y``."""
-    x = np.array(y, float)
-    for _ in range(30):
-        g = x
-        d = 1.0
-        for k, b in enumerate(coefficients, start=2):
-            g = g + b * x**k
-            d = d + float(k) * b * x ** (k - 1)
-        g = g - y
-        d = np.where(np.abs(d) < 0.2, np.sign(d) * 0.2 + (d == 0) * 0.2, d)
-        step = g / d
-        x -= step
-        if np.max(np.abs(step)) < 1e-13:
-            break
-    return x
+    y = np.asarray(y, float)
+    b = np.asarray(coefficients, float).ravel()
+    return _compiled_invert(np.ascontiguousarray(y).ravel(), b).reshape(y.shape)
 
 
 def _relayout(coef: FloatArray, src: ModelSpec, dst: ModelSpec, *,

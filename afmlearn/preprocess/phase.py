@@ -21,6 +21,8 @@ __all__ = ["align_phase", "wrap_angle"]
 
 def wrap_angle(a: Any) -> Any:
     """Angle(s) [rad] wrapped to ``(-pi, pi]``: a float for a number, else an array."""
+    if isinstance(a, float):        # the hot scalar path (Newton steps on a phase)
+        return float(math.pi - (math.pi - a) % (2 * math.pi))
     return np.pi - np.mod(np.pi - np.asarray(a, float), 2 * np.pi) if np.ndim(a) else \
         float(math.pi - (math.pi - float(a)) % (2 * math.pi))
 

@@ -95,3 +95,65 @@ def test_neck_loss_is_the_loop_area_and_converges_with_the_step():
     zq = np.linspace(a0, a0 + dc, 20001)
     area = -0.4 * np.trapezoid(m.spec.neck.column(zq, np.ones(zq.size, bool), a0), zq)
     assert area > 0 and e_ts == pytest.approx(area, rel=2e-3)
+
+
+def _neck_state_reference(z, a0, neck_length):
+    """Plain-Python twin of the compiled neck state (attach at z <= a0, snap past a0 + d_c,
+    the period swept twice)."""
+    out, on = np.zeros(z.size, bool), False
+    for sweep in range(2):
+        for i, zi in enumerate(z):
+            if zi <= a0:
+                on = True
+            elif zi > a0 + neck_length:
+                on = False
+            if sweep:
+                out[i] = on
+    return out
+
+
+def _invert_reference(y, coefficients):
+    """Plain NumPy twin of the compiled detector inverse: Newton on every sample at once."""
+    x = np.array(y, float)
+    for _ in range(30):
+        g = x
+        d = 1.0
+        for k, b in enumerate(coefficients, start=2):
+            g = g + b * x**k
+            d = d + float(k) * b * x ** (k - 1)
+        g = g - y
+        d = np.where(np.abs(d) < 0.2, np.sign(d) * 0.2 + (d == 0) * 0.2, d)
+        step = g / d
+        x -= step
+        if np.max(np.abs(step)) < 1e-13:
+            break
+    return x
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_compiled_neck_state_matches_reference(seed):
+    from afmlearn.diagnose._kernel import neck_state
+    rng = np.random.default_rng(seed)
+    th = np.linspace(0.0, 2 * np.pi, 401, endpoint=False)
+    z = 0.05 + rng.uniform(0.9, 1.2) * (1 + np.cos(th + rng.uniform(0, 2 * np.pi)))
+    z = z + 0.01 * rng.standard_normal(z.size)          # chatter around the switches
+    a0, dc = rng.uniform(0.02, 0.08), rng.uniform(0.0, 0.3)
+    got = neck_state(z, a0, dc)
+    assert got.dtype == np.bool_ and got.shape == z.shape
+    assert np.array_equal(got, _neck_state_reference(z, a0, dc))
+    # a period that never touches is never attached, one always in contact always is
+    assert not neck_state(z + 5.0, a0, dc).any()
+    assert neck_state(np.full(7, a0), a0, dc).all()
+
+
+@pytest.mark.parametrize("coefficients", [(0.03, -0.01), (-0.06, 0.02, 0.002), (0.05,),
+                                          (0.0, 0.0)])
+def test_compiled_detector_inverse_matches_reference(coefficients):
+    from afmlearn.diagnose._kernel import invert_polynomial
+    x = np.linspace(-1.5, 1.5, 301)
+    b = np.asarray(coefficients, float)
+    y = x + sum(c * x ** (k + 2) for k, c in enumerate(b))
+    got = invert_polynomial(y, b)
+    # the twin stops when every sample's step is small, the kernel sample by sample
+    assert np.allclose(got, _invert_reference(y, b), rtol=0, atol=1e-13)
+    assert np.allclose(got, x, rtol=0, atol=1e-11)     # the map is monotone on this range
