@@ -64,6 +64,22 @@ def git_head() -> str:
         return "unknown"
 
 
+def git_snapshot(rev: str, root: Path) -> Path:
+    """``git archive`` of ``afmlearn/`` and ``simulator/`` at ``rev`` into ``root/<sha>``
+    (made once; a ``COMMIT`` file names it and marks it complete), so that a benchmark can
+    run the code of one commit beside the working tree. Returns the folder."""
+    sha = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short=10", rev],
+                         capture_output=True, text=True, check=True).stdout.strip()
+    dest = root / sha
+    if not (dest / "COMMIT").exists():
+        dest.mkdir(parents=True, exist_ok=True)
+        arch = subprocess.run(["git", "-C", str(ROOT), "archive", sha, "afmlearn",
+                               "simulator"], capture_output=True, check=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(dest)], input=arch, check=True)
+        (dest / "COMMIT").write_text(sha + "\n")
+    return dest
+
+
 def machine_info() -> dict[str, str]:
     """CPU, cores, library versions, date, load and simulator source fingerprint."""
     import numba

@@ -57,7 +57,15 @@ from pathlib import Path  # noqa: E402
 from typing import final  # noqa: E402
 
 import numpy as np  # noqa: E402
-from _common import ROOT, add_doc_flag, fmt, machine_info, md_table, write_section  # noqa: E402
+from _common import (  # noqa: E402
+    ROOT,
+    add_doc_flag,
+    fmt,
+    git_snapshot,
+    machine_info,
+    md_table,
+    write_section,
+)
 from scipy import stats  # noqa: E402
 from tqdm.auto import tqdm  # noqa: E402
 
@@ -386,21 +394,6 @@ def _since(commit: str):
                 capture_output=True, timeout=10).returncode == 0)
         return cache[c]
     return ok
-
-
-def make_snapshot(commit: str, root: Path) -> Path:
-    """``git archive`` of ``afmlearn/`` and ``simulator/`` at ``commit`` into
-    ``root/<id>`` (made once), with a ``COMMIT`` file naming it; returns the folder."""
-    full = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short=10", commit],
-                          capture_output=True, text=True, check=True).stdout.strip()
-    dest = root / full
-    if not (dest / "COMMIT").exists():
-        dest.mkdir(parents=True, exist_ok=True)
-        arch = subprocess.run(["git", "-C", str(ROOT), "archive", full, "afmlearn",
-                               "simulator"], capture_output=True, check=True).stdout
-        subprocess.run(["tar", "-x", "-C", str(dest)], input=arch, check=True)
-        (dest / "COMMIT").write_text(full + "\n")
-    return dest
 
 
 def series_jobs(settings: list[tuple[int, float]], per_cause: int, pairs: int, periods: float,
@@ -988,7 +981,7 @@ def series_main(args: argparse.Namespace, settings: list[tuple[int, float]],
     rec_dir = Path(args.records)
     if args.snapshot and not os.environ.get("BENCH_DIAGNOSE_CODE"):
         # run on a clean copy of one commit (the shared tree may hold others' edits)
-        snap = make_snapshot(args.snapshot, rec_dir / "code")
+        snap = git_snapshot(args.snapshot, rec_dir / "code")
         argv = [a for a in sys.argv if not a.startswith("--snapshot")]
         if "--snapshot" in sys.argv:
             i = sys.argv.index("--snapshot")

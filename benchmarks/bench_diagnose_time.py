@@ -90,19 +90,6 @@ def child(tree: str, path: str, tag: str, warm: str) -> dict:
             "drops": {c.cause: float(c.delta_chi2) for c in d.candidates_}}
 
 
-def snapshot(rev: str) -> str:
-    """``git archive`` of afmlearn/ and simulator/ at ``rev`` (reused when present)."""
-    sha = subprocess.run(["git", "rev-parse", "--short", rev], cwd=ROOT, check=True,
-                         capture_output=True, text=True).stdout.strip()
-    dest = CACHE / f"tree_{sha}"
-    if not (dest / "afmlearn").exists():
-        dest.mkdir(parents=True, exist_ok=True)
-        arch = subprocess.run(["git", "archive", sha, "afmlearn", "simulator"], cwd=ROOT,
-                              check=True, capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", str(dest)], input=arch, check=True)
-    return str(dest)
-
-
 def _same(a: dict, b: dict) -> str:
     """How two runs of one draw compare: causes, largest relative drop difference, gain."""
     if a["causes"] != b["causes"]:
@@ -160,7 +147,7 @@ def main(argv: list[str] | None = None) -> str:
     if not args.report_only:
         run = f"{time.strftime('%Y-%m-%d %H:%M')} ({C.git_head()}" + \
             (f" vs {args.base})" if args.base else ")")
-        trees = [(snapshot(args.base), "base")] if args.base else []
+        trees = [(str(C.git_snapshot(args.base, CACHE)), "base")] if args.base else []
         trees.append((str(ROOT), "work"))
         warm = str(case_file("none", 0))
         for cause in causes:

@@ -93,19 +93,6 @@ def child(tree: str, p: float, tag: str) -> dict:
             "profile": rec["profile"]}
 
 
-def snapshot(rev: str) -> str:
-    """``git archive`` of afmlearn/ and simulator/ at ``rev`` (reused when present)."""
-    sha = subprocess.run(["git", "rev-parse", "--short", rev], cwd=ROOT, check=True,
-                         capture_output=True, text=True).stdout.strip()
-    dest = ROOT / "outputs" / "bench_cache" / "identify" / f"tree_{sha}"
-    if not (dest / "afmlearn").exists():
-        dest.mkdir(parents=True, exist_ok=True)
-        arch = subprocess.run(["git", "archive", sha, "afmlearn", "simulator"], cwd=ROOT,
-                              check=True, capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", str(dest)], input=arch, check=True)
-    return str(dest)
-
-
 def table(records: list[dict]) -> str:
     rows = []
     for r in records:
@@ -140,7 +127,8 @@ def main(argv: list[str] | None = None) -> str:
         return ""
     info = C.machine_info()
     if not args.report_only:
-        trees = [(snapshot(args.base), args.base)] if args.base else []
+        cache = ROOT / "outputs" / "bench_cache" / "identify"
+        trees = [(str(C.git_snapshot(args.base, cache)), args.base)] if args.base else []
         trees.append((str(ROOT), "working tree " + C.git_head()))
         for p in [float(v) for v in args.exponents.split(",")]:
             for tree, tag in trees:
