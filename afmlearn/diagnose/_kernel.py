@@ -24,7 +24,7 @@ from simulator.forces._kernel import jkr_contact_radius_sqrt
 from simulator.integrate._kernel import CONTACT, FREE, N_WORK, NECK, integrate_one
 
 __all__ = ["simulate_model", "simulate_reference", "jkr_radius_sqrt", "neck_state",
-           "invert_polynomial"]
+           "invert_polynomial", "bvls"]
 
 #: a run whose modal deflection exceeds this (units of L_ref) has blown up
 BLOWUP = 1e6
@@ -86,6 +86,173 @@ def invert_polynomial(y: np.ndarray, b: np.ndarray) -> np.ndarray:
                 break
         out[i] = x
     return out
+
+
+@nb.njit(cache=True)
+def _small_lstsq(M: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Least-squares solution of ``M z = rhs`` (``M`` shape (p, k), p >= k, a few columns):
+    Householder QR and back substitution; LAPACK ``gelsd`` (minimum norm) where ``M`` is
+    numerically rank-deficient (a diagonal of R below 1e-12 of the largest)."""
+    p, k = M.shape
+    A = M.copy()
+    y = rhs.copy()
+    for j in range(k):
+        nx = 0.0
+        for i in range(j, p):
+            nx += A[i, j] * A[i, j]
+        nx = math.sqrt(nx)
+        if nx == 0.0:
+            continue
+        alpha = -nx if A[j, j] >= 0.0 else nx
+        v = A[j:, j].copy()
+        v[0] -= alpha
+        vv = 0.0
+        for i in range(v.size):
+            vv += v[i] * v[i]
+        if vv == 0.0:
+            continue
+        for col in range(j, k):
+            d = 0.0
+            for i in range(v.size):
+                d += v[i] * A[j + i, col]
+            f = 2.0 * d / vv
+            for i in range(v.size):
+                A[j + i, col] -= f * v[i]
+        d = 0.0
+        for i in range(v.size):
+            d += v[i] * y[j + i]
+        f = 2.0 * d / vv
+        for i in range(v.size):
+            y[j + i] -= f * v[i]
+    dmax = 0.0
+    for j in range(k):
+        dmax = max(dmax, abs(A[j, j]))
+    for j in range(k):
+        if not abs(A[j, j]) > 1e-12 * dmax:
+            return np.linalg.lstsq(M, rhs, -1.0)[0]
+    z = np.empty(k)
+    for j in range(k - 1, -1, -1):
+        acc = y[j]
+        for i in range(j + 1, k):
+            acc -= A[j, i] * z[i]
+        z[j] = acc / A[j, j]
+    return z
+
+
+@nb.njit(cache=True)
+def _free_lstsq(R: np.ndarray, rhs: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """Least-squares solution of ``R[:, free] z = rhs``, shape (n_free,)."""
+    idx = np.flatnonzero(free)
+    Rf = np.empty((R.shape[0], idx.size))
+    for j in range(idx.size):
+        Rf[:, j] = R[:, idx[j]]
+    return _small_lstsq(Rf, rhs)
+
+
+@nb.njit(cache=True)
+def bvls(R: np.ndarray, c: np.ndarray, const: float, lb: np.ndarray, ub: np.ndarray,
+         tol: float = 1e-10) -> np.ndarray:
+    """Bounded-variable least squares ``min |R x - c|^2`` s.t. ``lb <= x <= ub`` (shapes
+    (p, p), (p,), (p,), (p,)): the algorithm of Stark & Parker (1995) as SciPy's
+    ``lsq_linear(method="bvls")`` runs it (its initialisation from the clipped unconstrained
+    solution, its KKT and cost-change stops at ``tol``), on a problem already reduced by QR:
+    ``A = Q R``, ``c = Q^T b``, ``const = |b|^2 - |c|^2`` (the part of the cost no ``x``
+    changes, kept so that the relative cost-change stop is SciPy's). A coefficient that reaches
+    a bound is put on it exactly (SciPy's interpolation can leave it one rounding outside).
+    Returns ``x``, shape (p,)."""
+    n = R.shape[1]
+    x = _small_lstsq(R, c)
+    inside = True
+    for i in range(n):
+        if not (lb[i] <= x[i] <= ub[i]):
+            inside = False
+    if inside:
+        return x
+    on_bound = np.zeros(n)
+    for i in range(n):
+        if x[i] <= lb[i]:
+            x[i] = lb[i]
+            on_bound[i] = -1.0
+        elif x[i] >= ub[i]:
+            x[i] = ub[i]
+            on_bound[i] = 1.0
+    r = R @ x - c
+    cost = 0.5 * (r @ r + const)
+    # initialisation: the free variables' solution, violators moved to their bounds, until
+    # the free solution is feasible
+    free = on_bound == 0.0
+    iteration = 0
+    while free.any():
+        iteration += 1
+        fixed = np.where(free, 0.0, x)
+        z = _free_lstsq(R, c - R @ fixed, free)
+        idx = np.flatnonzero(free)
+        any_v = False
+        for k in range(idx.size):
+            i = idx[k]
+            if z[k] < lb[i]:
+                x[i] = lb[i]
+                on_bound[i] = -1.0
+                any_v = True
+            elif z[k] > ub[i]:
+                x[i] = ub[i]
+                on_bound[i] = 1.0
+                any_v = True
+            else:
+                x[i] = z[k]
+        if not any_v:
+            break
+        free = on_bound == 0.0
+    r = R @ x - c
+    cost = 0.5 * (r @ r + const)
+    g = R.T @ r
+    max_iter = n + iteration
+    for _ in range(iteration, max_iter):
+        opt = 0.0
+        for i in range(n):
+            v = abs(g[i]) if on_bound[i] == 0.0 else g[i] * on_bound[i]
+            opt = max(opt, v)
+        if opt < tol:
+            break
+        best, move = -np.inf, 0
+        for i in range(n):
+            if g[i] * on_bound[i] > best:
+                best, move = g[i] * on_bound[i], i
+        on_bound[move] = 0.0
+        while True:
+            free = on_bound == 0.0
+            idx = np.flatnonzero(free)
+            fixed = np.where(free, 0.0, x)
+            z = _free_lstsq(R, c - R @ fixed, free)
+            alpha, hit, side = np.inf, -1, 0.0
+            for k in range(idx.size):
+                i = idx[k]
+                if z[k] < lb[i]:
+                    a = (lb[i] - x[i]) / (z[k] - x[i])
+                    if a < alpha:
+                        alpha, hit, side = a, i, -1.0
+            for k in range(idx.size):
+                i = idx[k]
+                if z[k] > ub[i]:
+                    a = (ub[i] - x[i]) / (z[k] - x[i])
+                    if a < alpha:
+                        alpha, hit, side = a, i, 1.0
+            if hit < 0:
+                for k in range(idx.size):
+                    x[idx[k]] = z[k]
+                break
+            for k in range(idx.size):
+                i = idx[k]
+                x[i] = x[i] * (1.0 - alpha) + alpha * z[k]
+            on_bound[hit] = side
+            x[hit] = lb[hit] if side < 0.0 else ub[hit]     # on it, not a rounding beside it
+        r = R @ x - c
+        cost_new = 0.5 * (r @ r + const)
+        if cost - cost_new < tol * cost:
+            break
+        cost = cost_new
+        g = R.T @ r
+    return x
 
 
 @nb.njit(cache=True)

@@ -157,3 +157,51 @@ def test_compiled_detector_inverse_matches_reference(coefficients):
     # the twin stops when every sample's step is small, the kernel sample by sample
     assert np.allclose(got, _invert_reference(y, b), rtol=0, atol=1e-13)
     assert np.allclose(got, x, rtol=0, atol=1e-11)     # the map is monotone on this range
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_compiled_bvls_matches_scipy(seed):
+    """The compiled BVLS on the QR-reduced problem against SciPy's ``lsq_linear(method=
+    "bvls")`` on the full one: free, one-sided and boxed coefficients, bounds active or
+    not, columns scaled over seven decades (unit-norm scaling as ``bounded_lstsq`` does)."""
+    from scipy.optimize import lsq_linear
+
+    from afmlearn.diagnose._kernel import bvls
+    rng = np.random.default_rng(seed)
+    active = 0
+    for _ in range(300):
+        m, p = int(rng.integers(20, 300)), int(rng.integers(1, 10))
+        A = rng.standard_normal((m, p)) * 10 ** rng.uniform(-4, 3, p)
+        b = 3 * rng.standard_normal(m)
+        lo = np.where(rng.uniform(size=p) < 0.5, -np.inf, rng.uniform(-1, 0.2, p))
+        width = rng.uniform(0.3, 1.5, p)
+        hi = np.where(rng.uniform(size=p) < 0.5, np.inf, np.where(np.isfinite(lo), lo + width,
+                                                                  width))
+        scale = np.linalg.norm(A, axis=0)
+        As, lo, hi = A / scale, lo * scale, hi * scale
+        ref = lsq_linear(As, b, bounds=(lo, hi), method="bvls", lsmr_tol="auto").x
+        Rb = np.linalg.qr(np.column_stack([As, b]), mode="r")
+        x = bvls(np.ascontiguousarray(Rb[:p, :p]), Rb[:p, p].copy(), float(Rb[p, p] ** 2),
+                 lo, hi)
+        assert np.all((x >= lo) & (x <= hi))
+        assert np.allclose(x, ref, rtol=1e-10, atol=1e-10 * max(1.0, np.abs(ref).max()))
+        active += bool(np.any(np.isclose(ref, lo) | np.isclose(ref, hi)))
+    assert active > 100          # the bounds were active on many of the problems
+
+
+def test_bvls_keeps_scipys_answer_on_a_rank_deficient_design():
+    """Two equal columns: the cost reaches SciPy's minimum (the split between them is not
+    unique)."""
+    from scipy.optimize import lsq_linear
+
+    from afmlearn.diagnose.balance import bounded_lstsq
+    rng = np.random.default_rng(3)
+    A = rng.standard_normal((200, 4))
+    A = np.column_stack([A, A[:, 1]])
+    b = rng.standard_normal(200)
+    lo, hi = np.r_[-np.inf, 0.0, -np.inf, 0.0, 0.0], np.full(5, np.inf)
+    P, t = np.zeros((1, 5)), np.zeros(1)
+    coef, r = bounded_lstsq(A, b, P, t, lo, hi)
+    ref = lsq_linear(A, b, bounds=(lo, hi), method="bvls").x
+    assert r @ r == pytest.approx(np.sum((A @ ref - b) ** 2), rel=1e-12)
+    assert np.all(coef >= lo)
