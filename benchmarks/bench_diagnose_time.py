@@ -27,6 +27,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import statistics  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -166,7 +167,6 @@ def main(argv: list[str] | None = None) -> str:
     records = [json.loads(line) for line in STORE.read_text().splitlines()] \
         if STORE.exists() else []
     tab, ratios = table(records)
-    import statistics
     summary = (f"Median ratio base / working tree over {len(ratios)} draws: "
                f"**{statistics.median(ratios):.2f}x** (range {min(ratios):.2f}-"
                f"{max(ratios):.2f})." if ratios else "No base runs recorded.")
