@@ -40,6 +40,7 @@ single-threaded process)::
 from __future__ import annotations
 
 import os
+import re
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # one process per core
 
@@ -158,6 +159,13 @@ def calibrate(null_records: list[dict], family_rate: float) -> NullCalibration:
            f"delta_chi2 over {len(null_records)} null traces (samples/period, noise "
            f"{settings}), at least the chi2 point of its parameter count")
     return NullCalibration(thresholds=thr, min_gain=0.05, source=src)
+
+
+def null_count(source: str) -> int:
+    """The number of null traces a calibration's ``source`` text says it rests on (0 when it
+    does not say); the text also says "over 7 causes", which is not it."""
+    m = re.search(r"over (\d+) null traces", source)
+    return int(m.group(1)) if m else 0
 
 
 def evaluate(records: list[dict], calib: NullCalibration) -> dict:
@@ -1175,8 +1183,7 @@ def main(argv: list[str] | None = None) -> int:
                 for i in range(args.per_cause) for c in CAUSES]
         recs = run_jobs(jobs, rec_dir / "eval.jsonl", args.workers)
         results[(spp, noise)] = evaluate(recs, calib)
-    body = section(results, calib, n_null or int(calib.source.split(" over ")[1].split()[0])
-                   if " over " in calib.source else 0)
+    body = section(results, calib, n_null or null_count(calib.source))
     write_section("diagnose", "Diagnosis: hidden-effect confusion matrix (`bench_diagnose.py`)",
                   body, info, write=not args.no_doc)
     return 0

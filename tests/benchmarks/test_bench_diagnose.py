@@ -19,11 +19,19 @@ from bench_diagnose import (  # noqa: E402
     _parse_variant,
     calibrate,
     interval,
+    null_count,
     series_calibrate,
     series_title,
     share,
     upper_bound,
 )
+
+
+def test_null_count_reads_the_traces_not_the_causes():
+    # the source text of a calibration says "over 7 causes" before "over 60 null traces"
+    recs = [_null({"higher_mode": float(i), "viscoelastic": 0.0}) for i in range(60)]
+    assert null_count(calibrate(recs, family_rate=0.05).source) == 60
+    assert null_count("shipped defaults") == 0
 
 
 def _null(drops: dict[str, float]) -> dict:
