@@ -339,8 +339,7 @@ class OutputError:
         # leave the state at the solution returned (a snapshot taken now, the held-out refits
         # and the next refinement start from its own orbits: measured on a 1,000 spp detector
         # series, the last probe's orbits gave chi2 1.4e6 at a point fitted to 7,333)
-        self._warm.update(warm)
-        self._phases = list(phases)
+        self._warm.update(warm)             # (its phases were set when it became the best)
         return Solution(spec=spec, coef=coef, residual=r, chi2=c2, values=vals,
                         phases=tuple(phases)), ok
 
