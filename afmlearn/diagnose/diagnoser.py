@@ -922,13 +922,15 @@ class Diagnoser:
             h = fit_harmonics(tau, y, cal.omega,
                               n_harmonics=min(orbit.n_h, max(y.size // 4 - 1, 1)))
             return HeldOut(tau=tau, measured=y, reference=h.evaluate(tau),
-                           reference_rate=h.evaluate(tau, 1))
+                           reference_rate=h.evaluate(tau, 1),
+                           harmonics=np.asarray(h.complex_amplitudes))
         e = min(o.start + n_max, o.stop)
         tau, y = cal.tau[o.start:e], cal.x[o.start:e]
         n = np.arange(orbit.n_h + 1)
         ph = np.exp(1j * np.outer(cal.omega * tau, n))
         return HeldOut(tau=tau, measured=y, reference=np.real(ph @ orbit.Y),
-                       reference_rate=np.real(ph @ (1j * n * cal.omega * orbit.Y)))
+                       reference_rate=np.real(ph @ (1j * n * cal.omega * orbit.Y)),
+                       harmonics=np.asarray(orbit.Y))
 
     def _test(self, h: AbstractHypothesis, current: _Fit, ctx: Context,
               calib: NullCalibration, traces: Sequence[Any],
@@ -1213,14 +1215,15 @@ class Diagnoser:
     def _heldout(self, fit: _Fit) -> FloatArray:
         """Held-out NRMSE per observation (NaN where not held out); stores the predictions
         under ``fit.key``."""
-        oe, obs, orbits = self._oe, self._obs, self._orbits
+        oe, obs = self._oe, self._obs
         out = np.full(len(obs), np.nan)
         sol = fit.sol
-        if fit.warm is not None and self.design_ != "tail":
-            # (one record keeps the warm starts as they are: its benchmark was measured so)
+        if fit.warm is not None:
             oe.restore(fit.warm)
         if self.design_ == "tail":
-            out[0] = self._predict(0, sol, sol.phases[0], fit.key)
+            # the recorded drive phase, else the one nuisance aligned on the tail (heldout.py)
+            prior = obs[0].phase_prior
+            out[0] = self._predict(0, sol, None if prior is None else prior[0], fit.key)
             return out
         n = len(obs)
         for group in self.folds_:
@@ -1231,12 +1234,12 @@ class Diagnoser:
             for j in group:
                 prior = obs[j].phase_prior
                 out[j] = self._predict(j, refit, None if prior is None else prior[0],
-                                       fit.key, Y=orbits[j].Y)
+                                       fit.key)
         return out
 
-    def _predict(self, j: int, sol: Solution, phase: float | None, key: str,
-                 Y: NDArray[np.complex128] | None = None) -> float:
-        """Held-out NRMSE of ``sol``'s steady orbit at observation ``j``."""
+    def _predict(self, j: int, sol: Solution, phase: float | None, key: str) -> float:
+        """Held-out NRMSE of ``sol``'s steady orbit at observation ``j`` with drive phase
+        ``phase`` (None: aligned on the held-out harmonics)."""
         oe, held = self._oe, self._held[j]
         m0 = oe.model(j, sol.spec, sol.coef)
         y0, v0 = steady_output(oe, j, m0, max_settle=self.max_settle_periods)
@@ -1245,8 +1248,8 @@ class Diagnoser:
             held.simulated_rate[key] = np.full(held.tau.size, np.nan)
             return math.inf
         if phase is None:
-            assert Y is not None
-            phase = phase_for(y0, Y, None)
+            assert held.harmonics is not None
+            phase = phase_for(y0, held.harmonics, None)
         y = sample_orbit(y0, m0.omega, held.tau, phase)
         held.simulated[key] = y
         held.simulated_rate[key] = sample_orbit(v0, m0.omega, held.tau, phase)
