@@ -953,7 +953,8 @@ class Diagnoser:
         n_rejected = jb.n_rejected - rejected0
         no_fit = not any(math.isfinite(s.chi2) for s in starts)
         if jb.n_obs == 1 and not no_fit:
-            sol, _, build, params = refine_output_error(oe, starts, h, current.sol, ctx)
+            sol, _, build, params = refine_output_error(oe, starts, h, current.sol, ctx,
+                                                        warm=current.warm)
         else:
             if len(h.a0_grid) > 1 and not no_fit:   # several onsets: ranked by output error
                 starts.sort(key=lambda s: float(np.sum(oe.residual(s.spec, s.coef)[0] ** 2)))
