@@ -43,3 +43,18 @@ def test_each_model_is_scored_at_the_phase_that_fits_the_tail(make_trace):
             shifted = nrmse(_shifted(held.tau, y, omega, n_h, delta), held.reference)
             assert shifted > at * (1 - 1e-3), (key, delta, at, shifted)
 
+
+
+def test_a_recorded_phase_is_the_one_the_tail_is_predicted_at(make_series):
+    """One row of a series with its drive phase recorded: every model's tail is predicted at
+    that phase (model convention ``B cos(Omega tau - phi)``, ``phi = -drive_phase_rad``),
+    none aligned on the data it is scored against."""
+    path, _ = make_series("viscoelastic+detector_nonlinearity", 7)
+    trace = read_trace(path)
+    d = Diagnoser(all_gains=True).fit(trace, row=1)
+    assert d.design_ == "tail"
+    recorded = -float(trace.row(1).drive_phase_rad)
+    phases = d.heldout_.phase
+    assert "none" in phases and len(phases) >= 2
+    for key, phi in phases.items():
+        assert abs(np.angle(np.exp(1j * (phi - recorded)))) < 1e-9, (key, phi, recorded)
