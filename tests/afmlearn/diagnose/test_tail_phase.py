@@ -1,10 +1,11 @@
-"""One record's held-out tail: every model is scored at the drive phase that fits the tail.
+"""One record's held-out tail: every model is scored at the recorded drive phase, else at the
+one that fits the tail.
 
-The drive phase of a single record is not recorded, so it is a nuisance, not a prediction:
-the held-out NRMSE of each model must be its minimum over that one number (as for a held-out
-set-point). The phase the output-error fit projected out is optimal for the fit's whitened
-harmonics, not for the NRMSE; scoring the tail at it penalised a right extension by its
-harmonic weighting (an electrostatic draw at 1,000 samples/period: gain 0.40 -> 0.03).
+Without a recorded drive phase the phase is a nuisance, not a prediction: the held-out NRMSE
+of each model must be its minimum over that one number (as for a held-out set-point). The
+phase the output-error fit projected out is optimal for the fit's whitened harmonics, not for
+the NRMSE; scoring the tail at it penalised a right extension by its harmonic weighting (an
+electrostatic draw at 1,000 samples/period: gain 0.40 -> 0.03).
 """
 
 from __future__ import annotations
@@ -42,7 +43,6 @@ def test_each_model_is_scored_at_the_phase_that_fits_the_tail(make_trace):
         for delta in (-1e-3, -2e-4, -5e-5, 5e-5, 2e-4, 1e-3):
             shifted = nrmse(_shifted(held.tau, y, omega, n_h, delta), held.reference)
             assert shifted > at * (1 - 1e-3), (key, delta, at, shifted)
-
 
 
 def test_a_recorded_phase_is_the_one_the_tail_is_predicted_at(make_series):
